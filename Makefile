@@ -1,0 +1,57 @@
+# Two commands set everything up on a fresh machine:
+#   make demo   create .venv, install, run the pipeline on a generated synthetic scene
+#   make test   create .venv, install, run the test suite (what CI runs)
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+# Shared libraries Open3D loads at import (libusb), for rendering (GL, EGL, OpenMP), and for its
+# Filament renderer on the CPU (Vulkan loader + Mesa's lavapipe).
+APT_PACKAGES := libusb-1.0-0 libgl1 libegl1 libgomp1 libvulkan1 mesa-vulkan-drivers
+
+.PHONY: demo test test-all system-deps install lint bench clean
+
+demo: install
+	$(VENV)/bin/mocap demo
+
+test: install
+	@$(VENV)/bin/rerun analytics disable >/dev/null 2>&1 || true
+	$(PY) -m pytest -q
+
+test-all: install
+	@$(VENV)/bin/rerun analytics disable >/dev/null 2>&1 || true
+	$(PY) -m pytest -q -m ''
+
+bench: install
+	$(PY) benchmarks/sfm_overhead.py
+
+lint: install
+	$(VENV)/bin/ruff check recon tracking plugins tests benchmarks
+
+install: system-deps $(VENV)/.installed
+
+# Debian/Ubuntu only; other systems are left alone. Root installs, anyone else gets the line.
+system-deps:
+	@command -v dpkg >/dev/null 2>&1 || exit 0; \
+	missing=""; \
+	for p in $(APT_PACKAGES); do \
+	  dpkg -s $$p 2>/dev/null | grep -q '^Status: install ok installed' || missing="$$missing $$p"; \
+	done; \
+	[ -z "$$missing" ] && exit 0; \
+	if [ "$$(id -u)" = 0 ]; then \
+	  echo "installing Debian packages:$$missing"; \
+	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing >/dev/null; \
+	else \
+	  echo "Open3D needs Debian packages that are missing. Install them, then re-run make:"; \
+	  echo "  sudo apt-get install -y$$missing"; \
+	  exit 1; \
+	fi
+
+$(VENV)/.installed: pyproject.toml
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[dev]'
+	@touch $@
+
+clean:
+	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache

@@ -1,0 +1,30 @@
+"""Plugin kinds, their Protocols and the entry-point registry.
+
+Every extension point of the pipeline is a *kind* (for example ``intrinsics``). A kind is one
+Protocol in :mod:`plugins.protocols` and one entry-point group ``mocap.<kind>``. Built-in plugins
+are declared in this project's ``pyproject.toml`` exactly as a third-party package declares its
+own, so there is a single loading path for both.
+"""
+
+from plugins.protocols import (
+    CameraInfo,
+    FocalPrior,
+    IntrinsicInitialiser,
+    IntrinsicsContext,
+    IntrinsicsResult,
+)
+from plugins.registry import KINDS, PluginError, PluginInfo, available, create, list_plugins
+
+__all__ = [
+    "KINDS",
+    "CameraInfo",
+    "FocalPrior",
+    "IntrinsicInitialiser",
+    "IntrinsicsContext",
+    "IntrinsicsResult",
+    "PluginError",
+    "PluginInfo",
+    "available",
+    "create",
+    "list_plugins",
+]

@@ -1,0 +1,74 @@
+"""Protocols of every plugin kind, and the plain data they exchange with the pipeline.
+
+A plugin is a class with:
+
+- ``Options``: a keyword-only dataclass of its settings (each field documented with
+  ``metadata={"help": ...}``), filled from ``-O key=value`` on the command line;
+- ``description``: one line shown by ``mocap plugins``;
+- a constructor taking one ``Options`` instance;
+- the kind's method (for intrinsic initialisers, ``initialise``).
+
+Plugins never write to the workspace: they return results and the pipeline applies them, so
+that every plugin's output goes through the same atomic, recorded step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar, Protocol, runtime_checkable
+
+
+@dataclass(frozen=True, kw_only=True)
+class CameraInfo:
+    """One COLMAP camera of the database and the images that use it."""
+
+    camera_id: int
+    model: str
+    width: int
+    height: int
+    image_names: tuple[str, ...]
+
+
+@dataclass(frozen=True, kw_only=True)
+class IntrinsicsContext:
+    """What an intrinsic initialiser may read. It runs after matching and before mapping."""
+
+    database_path: Path
+    """COLMAP database with keypoints, matches and two-view geometries. Read it, never write."""
+    images_dir: Path
+    """Folder of the workspace images; names in ``cameras`` are relative to it."""
+    cameras: tuple[CameraInfo, ...]
+
+
+@dataclass(frozen=True, kw_only=True)
+class FocalPrior:
+    """Focal length to start mapping from, for one camera."""
+
+    camera_id: int
+    focal_px: float | None
+    """Focal length in pixels, or None for COLMAP's default guess 1.2·max(w, h) (not a prior)."""
+    source: str
+    """How it was obtained, in words, for the run record and the summary."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class IntrinsicsResult:
+    priors: tuple[FocalPrior, ...]
+    refine_focal: bool = True
+    """Whether bundle adjustment may change the focal length."""
+    notes: tuple[str, ...] = ()
+    """Warnings or remarks for the user, one line each."""
+    details: Mapping[str, Any] = field(default_factory=dict)
+    """JSON-serialisable extra output (for example a per-pair table), stored in run.json."""
+
+
+@runtime_checkable
+class IntrinsicInitialiser(Protocol):
+    """Sets each camera's focal prior in the database before incremental mapping."""
+
+    Options: ClassVar[type]
+    description: ClassVar[str]
+
+    def initialise(self, context: IntrinsicsContext) -> IntrinsicsResult: ...

@@ -1,0 +1,175 @@
+"""The `mocap` command. Each subcommand parses flags and calls one library function."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+from recon.configs import add_config_arguments, config_from_args
+from recon.errors import UserError
+
+_EPILOG = """examples:
+  mocap demo                                  synthetic scene → model, errors vs truth
+  mocap init ws/temple --images photos/       make a workspace from a folder of photos
+  mocap sfm ws/temple                         sparse model in ws/temple/sparse/0
+  mocap sfm ws/temple --intrinsics fixed -O focal_px=1520
+  mocap view ws/temple                        open the recordings in the Rerun viewer
+  mocap plugins                               list the registered plugins
+"""
+
+
+def _cmd_init(args: argparse.Namespace) -> None:
+    from recon.workspace import Workspace
+
+    ws, notes = Workspace.create(args.workspace, args.images, copy=args.copy,
+                                 overwrite=args.overwrite)
+    for note in notes:
+        print(f"note: {note}", file=sys.stderr)
+    print(f"workspace {ws.root}: {len(ws.image_names())} images in {ws.images_dir}")
+
+
+def _cmd_sfm(args: argparse.Namespace) -> None:
+    from recon.sfm import SfMConfig, run_sfm
+    from recon.workspace import Workspace
+
+    config = config_from_args(SfMConfig, args)
+    if args.images is not None:
+        ws, notes = Workspace.create(args.workspace, args.images)
+        for note in notes:
+            print(f"note: {note}", file=sys.stderr)
+    else:
+        ws = Workspace.open(args.workspace)
+    summary = run_sfm(ws, config, overwrite=args.overwrite)
+    print("\n".join(summary.lines()))
+
+
+def _cmd_view(args: argparse.Namespace) -> None:
+    from recon.recording import open_viewer
+    from recon.workspace import Workspace
+
+    ws = Workspace.open(args.workspace)
+    recordings = ws.recordings()
+    if not recordings:
+        raise UserError(f"{ws.logs_dir} holds no recordings yet; run `mocap sfm {ws.root}`")
+    command = open_viewer(recordings)
+    if command is None:
+        print(f"opened {len(recordings)} recording(s) in the Rerun viewer")
+    else:
+        print("no display here; open the recordings on a machine with one:")
+        print("  " + shlex.join(command))
+        print("or serve them to a browser:  " + shlex.join([command[0], "--web-viewer",
+                                                               *command[1:]]))
+
+
+def _cmd_plugins(args: argparse.Namespace) -> None:
+    from plugins.registry import KINDS, list_plugins
+
+    infos = list_plugins()
+    for kind, spec in KINDS.items():
+        print(f"{kind} ({spec.group}): {spec.summary}")
+        for info in (i for i in infos if i.kind == kind):
+            print(f"  {info.name:<16} {info.description}")
+            print(f"  {'':<16} {info.target}  [{info.distribution}]")
+            for name, kind_text, help_text in info.options:
+                print(f"  {'':<16}   -O {name}=...  {kind_text}  {help_text}")
+
+
+def _cmd_demo(args: argparse.Namespace) -> None:
+    from recon.demo import DemoConfig, run_demo
+    from recon.sfm import SfMConfig
+
+    config = config_from_args(DemoConfig, args)
+    report = run_demo(config, config_from_args(SfMConfig, args), overwrite=args.overwrite)
+    print("\n".join(report.lines()))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from recon.demo import DemoConfig
+    from recon.sfm import SfMConfig
+
+    parser = argparse.ArgumentParser(
+        prog="mocap",
+        description="Markerless 3D human motion capture: photos → calibrated cameras → "
+        "models → tracking, with Rerun recordings of every step.",
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=_version())
+    parser.add_argument("-v", "--verbose", action="store_true",
+                        help="show COLMAP's own log lines (hidden unless they are errors)")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("init", help="make a workspace from a folder of photos",
+                       description="Make a workspace: photos are hard-linked (or copied) into "
+                       "WS/images, never modified. Non-image files are skipped.")
+    p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder to create")
+    p.add_argument("--images", type=Path, required=True, metavar="DIR",
+                   help="folder of photos (searched recursively)")
+    p.add_argument("--copy", action="store_true", help="copy instead of hard-linking")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the images of an existing workspace (derived files are removed)")
+    p.set_defaults(func=_cmd_init)
+
+    p = sub.add_parser("sfm", help="sparse reconstruction: features, matching, mapping, BA",
+                       description="COLMAP structure from motion on the workspace photos. "
+                       "Writes WS/database.db, WS/sparse/0 and WS/logs/*.rrd; finished steps "
+                       "are reused unless their settings change or --overwrite is given.")
+    p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder")
+    p.add_argument("--images", type=Path, metavar="DIR",
+                   help="create the workspace from this photo folder first (as `mocap init`)")
+    p.add_argument("--overwrite", action="store_true", help="recompute every step")
+    add_config_arguments(p, SfMConfig)
+    p.set_defaults(func=_cmd_sfm)
+
+    p = sub.add_parser("view", help="open the workspace's recordings in the Rerun viewer")
+    p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder")
+    p.set_defaults(func=_cmd_view)
+
+    p = sub.add_parser("plugins", help="list every registered plugin of every kind")
+    p.set_defaults(func=_cmd_plugins)
+
+    p = sub.add_parser("demo", help="run the pipeline on a synthetic scene and score it",
+                       description="Render photos of a synthetic textured room with known "
+                       "cameras, run the pipeline on them, and print the recovered focal length "
+                       "and pose errors against the truth. No download needed.")
+    add_config_arguments(p, DemoConfig)
+    p.add_argument("--overwrite", action="store_true", help="recompute every step")
+    add_config_arguments(p, SfMConfig, exclude=("seed",))
+    p.set_defaults(func=_cmd_demo)
+    return parser
+
+
+def _version() -> str:
+    from recon import __version__
+
+    return f"mocap {__version__}"
+
+
+def _quiet_colmap(verbose: bool) -> None:
+    import pycolmap
+
+    # glog levels: 0 INFO, 1 WARNING, 2 ERROR. COLMAP's warnings are about situations we report
+    # ourselves in plain words, so only errors pass by default.
+    pycolmap.logging.minloglevel = 0 if verbose else 2
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    _quiet_colmap(args.verbose)
+    try:
+        args.func(args)
+    except UserError as exc:
+        print(f"mocap {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"mocap {args.command}: interrupted; finished steps are kept, the unfinished "
+              "one left no output", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,195 @@
+"""Rerun recordings of every step. This is the only module that imports rerun.
+
+Conventions, stated once here and used everywhere:
+
+- One recording per step, saved to ``WS/logs/<step>.rrd`` (application id ``mocap``), written to
+  a ``.partial`` file and renamed when complete.
+- Entity tree: ``world/points``; ``world/cameras/<image>`` carries the camera pose;
+  ``world/cameras/<image>/image`` carries the ``Pinhole`` and the photo; its child
+  ``.../image/keypoints`` the 2D observations. Children inherit their parent's transform.
+- COLMAP poses are ``cam_from_world``; they are logged with
+  ``relation=ChildFromParent`` (the camera entity is the child, the world its parent), as a
+  rotation matrix, so no quaternion order is involved (COLMAP files store quaternions wxyz,
+  pycolmap's ``Rotation3d.quat`` is xyzw, Rerun's ``Quaternion`` is xyzw).
+- Camera axes are RDF (x right, y down, z forward), as in COLMAP and OpenCV. The world frame is
+  COLMAP's arbitrary model frame, shown as right-handed Y-down like its cameras.
+- Photos are logged JPEG-encoded and downscaled to at most ``MAX_LOGGED_IMAGE_SIZE`` pixels; the
+  ``Pinhole`` is scaled to match, so that rays still hit the same pixels. Lens distortion is not
+  modelled by ``Pinhole``: the photo is shown as captured.
+- Anything constant (cameras, photos, the final model) is logged ``static=True``; progress
+  curves go on sequence timelines (``image``, ``pair``, ``registration``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import re
+from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
+
+import cv2
+import numpy as np
+import rerun as rr
+
+from recon.workspace import atomic_output
+
+APP_ID = "mocap"
+MAX_LOGGED_IMAGE_SIZE = 1024
+
+
+@contextlib.contextmanager
+def step_recording(path: Path, step: str) -> Iterator[rr.RecordingStream]:
+    """A recording stream saved atomically to ``path``."""
+    with atomic_output(path) as tmp:
+        rec = rr.RecordingStream(APP_ID, recording_id=f"{step}-{path.parent.parent.name}")
+        rec.save(tmp)
+        rec.send_recording_name(step)
+        rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Y_DOWN, static=True)
+        try:
+            yield rec
+        finally:
+            rec.flush()
+            rec.disconnect()
+
+
+def entity_name(image_name: str) -> str:
+    """An entity path part for an image name (no slashes or dots, which Rerun parses)."""
+    return re.sub(r"[^A-Za-z0-9_-]+", "_", image_name)
+
+
+def _encoded_image(path: Path, scale: float) -> rr.EncodedImage | None:
+    """The photo as JPEG, or None when it is not on disk (a model made without photos)."""
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR) if path.is_file() else None
+    if image is None:
+        return None
+    if scale < 1.0:
+        image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    ok, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 90])
+    if not ok:
+        raise OSError(f"cannot encode {path}")
+    return rr.EncodedImage(contents=data.tobytes(), media_type="image/jpeg")
+
+
+def _display_scale(width: int, height: int) -> float:
+    return min(1.0, MAX_LOGGED_IMAGE_SIZE / max(width, height))
+
+
+def log_camera_image(
+    rec: rr.RecordingStream,
+    *,
+    image_name: str,
+    image_path: Path,
+    K: np.ndarray,
+    width: int,
+    height: int,
+    cam_from_world: np.ndarray | None = None,
+    points2D: np.ndarray | None = None,
+) -> None:
+    """Log one camera: pose (if known), pinhole, photo and keypoints (``points2D``: (N, 2) px).
+
+    ``K`` is the 3x3 calibration in pixels of the full-size image.
+    """
+    base = f"world/cameras/{entity_name(image_name)}"
+    if cam_from_world is not None:
+        rec.log(
+            base,
+            rr.Transform3D(
+                mat3x3=cam_from_world[:, :3],
+                translation=cam_from_world[:, 3],
+                relation=rr.TransformRelation.ChildFromParent,
+            ),
+            static=True,
+        )
+    scale = _display_scale(width, height)
+    K_display = np.diag([scale, scale, 1.0]) @ K
+    pinhole = rr.Pinhole(
+        image_from_camera=K_display,
+        resolution=[round(width * scale), round(height * scale)],
+        camera_xyz=rr.ViewCoordinates.RDF,
+        image_plane_distance=0.5,
+    )
+    photo = _encoded_image(image_path, scale)
+    rec.log(f"{base}/image", pinhole, *([photo] if photo is not None else []), static=True)
+    if points2D is not None and len(points2D):
+        rec.log(
+            f"{base}/image/keypoints",
+            rr.Points2D(np.asarray(points2D) * scale, radii=1.5, colors=[40, 220, 40]),
+            static=True,
+        )
+
+
+def log_points(
+    rec: rr.RecordingStream,
+    points_in_world: np.ndarray,
+    colors: np.ndarray | None = None,
+    entity: str = "world/points",
+) -> None:
+    """``points_in_world``: (N, 3); ``colors``: (N, 3) uint8 RGB."""
+    rec.log(entity, rr.Points3D(points_in_world, colors=colors, radii=-1.5), static=True)
+
+
+def log_series(
+    rec: rr.RecordingStream, timeline: str, entity: str, values: Sequence[float]
+) -> None:
+    """One scalar curve on a sequence timeline, index 0..N-1."""
+    for i, value in enumerate(values):
+        rec.set_time(timeline, sequence=i)
+        rec.log(entity, rr.Scalars(float(value)))
+    rec.reset_time()
+
+
+def log_scalar(
+    rec: rr.RecordingStream, timeline: str, index: int, entity: str, value: float
+) -> None:
+    rec.set_time(timeline, sequence=index)
+    rec.log(entity, rr.Scalars(float(value)))
+    rec.reset_time()
+
+
+def log_table(rec: rr.RecordingStream, entity: str, title: str, rows: Sequence[Mapping]) -> None:
+    """A Markdown table (a list of dicts with the same keys) as a static text document."""
+    if rows:
+        keys = list(rows[0])
+        lines = [
+            f"# {title}",
+            "",
+            "| " + " | ".join(keys) + " |",
+            "|" + "---|" * len(keys),
+            *("| " + " | ".join(_fmt(r[k]) for k in keys) + " |" for r in rows),
+        ]
+    else:
+        lines = [f"# {title}", "", "(empty)"]
+    rec.log(entity, rr.TextDocument("\n".join(lines), media_type="text/markdown"), static=True)
+
+
+def _fmt(value: object) -> str:
+    return f"{value:.4g}" if isinstance(value, float) else str(value)
+
+
+def viewer_command(recordings: Sequence[Path]) -> list[str]:
+    """The command that opens recordings in the Rerun viewer (shipped in the rerun-sdk wheel)."""
+    import shutil
+    import sys
+
+    exe = shutil.which("rerun") or str(Path(sys.executable).with_name("rerun"))
+    return [exe, *map(str, recordings)]
+
+
+def has_display() -> bool:
+    import os
+    import sys
+
+    return sys.platform in ("darwin", "win32") or bool(
+        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+    )
+
+
+def open_viewer(recordings: Sequence[Path]) -> list[str] | None:
+    """Start the viewer in the background when there is a display; else return its command."""
+    import subprocess
+
+    command = viewer_command(recordings)
+    if not has_display():
+        return command
+    subprocess.Popen(command, start_new_session=True)
+    return None

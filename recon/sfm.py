@@ -1,0 +1,574 @@
+"""Structure from motion through pycolmap: features → matches → intrinsics → mapping + BA.
+
+Each step is a function from a workspace to files in it (see :mod:`recon.workspace`):
+
+=============  ==========================  ==============================================
+step           writes                      reads
+=============  ==========================  ==============================================
+features       database.db (keypoints)     images/
+matches        database.db (matches, F)    database.db
+intrinsics     database.db (focal priors)  database.db, an ``intrinsics`` plugin
+mapping        sparse/0, sparse/1, ...     database.db, images/
+=============  ==========================  ==============================================
+
+Each is skipped when its output exists and its fingerprint (its own config and the
+fingerprints of the steps it reads) matches the one recorded in ``run.json``.
+"""
+
+from __future__ import annotations
+
+import enum
+import shutil
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pycolmap
+from PIL import Image
+
+import plugins
+from plugins.protocols import CameraInfo, IntrinsicsContext, IntrinsicsResult
+from recon import recording
+from recon.errors import UserError
+from recon.progress import bar, count_rows, polled
+from recon.workspace import StepRecord, Timer, Workspace, atomic_output, fingerprint
+
+
+class CameraMode(enum.StrEnum):
+    AUTO = "auto"
+    SINGLE = "single"
+    PER_IMAGE = "per-image"
+    PER_FOLDER = "per-folder"
+
+
+class Matcher(enum.StrEnum):
+    AUTO = "auto"
+    EXHAUSTIVE = "exhaustive"
+    SEQUENTIAL = "sequential"
+
+
+# Exhaustive matching is quadratic; beyond this many images `auto` switches to sequential.
+EXHAUSTIVE_MAX_IMAGES = 150
+
+
+@dataclass(frozen=True, kw_only=True)
+class SfMConfig:
+    """Settings of the sparse reconstruction. Field help is the CLI's help."""
+
+    intrinsics: str = field(
+        default="colmap-default",
+        metadata={"help": "intrinsic initialiser plugin (see `mocap plugins`)"},
+    )
+    intrinsics_options: tuple[str, ...] = field(
+        default=(),
+        metadata={
+            "help": "an option of the initialiser as KEY=VALUE (repeatable; see `mocap plugins`)",
+            "flags": ("-O", "--intrinsics-option"),
+        },
+    )
+    camera_model: str = field(
+        default="SIMPLE_RADIAL",
+        metadata={"help": "COLMAP camera model (SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, ...)"},
+    )
+    camera_mode: CameraMode = field(
+        default=CameraMode.AUTO,
+        metadata={
+            "help": "which images share intrinsics; auto: one camera when all photos have the "
+            "same size and EXIF camera and focal length, else one per image"
+        },
+    )
+    max_image_size: int = field(
+        default=3200,
+        metadata={"help": "downscale images to this many pixels on the long side for features"},
+    )
+    max_num_features: int = field(default=8192, metadata={"help": "SIFT features per image"})
+    matcher: Matcher = field(
+        default=Matcher.AUTO,
+        metadata={
+            "help": f"exhaustive, sequential (video order), or auto (exhaustive up to "
+            f"{EXHAUSTIVE_MAX_IMAGES} images)"
+        },
+    )
+    sequential_overlap: int = field(
+        default=10, metadata={"help": "sequential matching: neighbours matched per image"}
+    )
+    refine_focal: bool | None = field(
+        default=None,
+        metadata={"help": "refine focal in BA (default: as the initialiser says)"},
+    )
+    num_threads: int = field(default=-1, metadata={"help": "threads (-1: all cores)"})
+    seed: int = field(default=0, metadata={"help": "random seed, for repeatable runs"})
+
+    def __post_init__(self) -> None:
+        if self.camera_model not in _CAMERA_MODELS:
+            raise UserError(
+                f"unknown camera model {self.camera_model!r}; choose from "
+                + ", ".join(sorted(_CAMERA_MODELS))
+            )
+        if self.max_image_size < 100:
+            raise UserError(f"--max-image-size {self.max_image_size} is too small (min 100)")
+
+
+_CAMERA_MODELS = {
+    "SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL", "RADIAL", "OPENCV", "FULL_OPENCV",
+    "SIMPLE_RADIAL_FISHEYE", "RADIAL_FISHEYE", "OPENCV_FISHEYE", "THIN_PRISM_FISHEYE",
+}
+
+
+def _config_dict(config: Any, *names: str) -> dict[str, Any]:
+    return {n: getattr(config, n) for n in names}
+
+
+def _device() -> pycolmap.Device:
+    return pycolmap.Device.cuda if pycolmap.has_cuda else pycolmap.Device.cpu
+
+
+# Features ------------------------------------------------------------------------------------
+def _camera_key(path: Path) -> tuple:
+    """What must agree for two photos to share intrinsics: size, camera body, focal length."""
+    with Image.open(path) as im:
+        exif = im.getexif()
+        sub = exif.get_ifd(0x8769)
+        return (im.size, exif.get(0x010F), exif.get(0x0110), str(sub.get(0x920A)))
+
+
+def resolve_camera_mode(ws: Workspace, mode: CameraMode) -> CameraMode:
+    if mode is not CameraMode.AUTO:
+        return mode
+    keys = {_camera_key(ws.images_dir / n) for n in ws.image_names()}
+    return CameraMode.SINGLE if len(keys) == 1 else CameraMode.PER_IMAGE
+
+
+def extract_features(ws: Workspace, config: SfMConfig, *, overwrite: bool = False) -> StepRecord:
+    names = ws.image_names()
+    if len(names) < 2:
+        raise UserError(f"{ws.images_dir} holds {len(names)} image(s); SfM needs at least 2")
+    mode = resolve_camera_mode(ws, config.camera_mode)
+    settings = {
+        **_config_dict(config, "camera_model", "max_image_size", "max_num_features"),
+        "camera_mode": str(mode),
+        "images": names,
+    }
+    fp = fingerprint("features", settings)
+    if not overwrite and ws.is_done("features", fp, ws.database_path):
+        return ws.step("features")  # type: ignore[return-value]
+
+    reader = pycolmap.ImageReaderOptions(camera_model=config.camera_model)
+    extraction = pycolmap.FeatureExtractionOptions()
+    extraction.max_image_size = config.max_image_size
+    extraction.num_threads = config.num_threads
+    extraction.sift.max_num_features = config.max_num_features
+    colmap_mode = {
+        CameraMode.SINGLE: pycolmap.CameraMode.SINGLE,
+        CameraMode.PER_IMAGE: pycolmap.CameraMode.PER_IMAGE,
+        CameraMode.PER_FOLDER: pycolmap.CameraMode.PER_FOLDER,
+    }[mode]
+    with Timer() as timer, atomic_output(ws.database_path) as db:
+        with polled(len(names), "features", "img", count_rows(db, "keypoints")):
+            pycolmap.extract_features(
+                db,
+                ws.images_dir,
+                image_names=names,
+                camera_mode=colmap_mode,
+                reader_options=reader,
+                extraction_options=extraction,
+                device=_device(),
+            )
+        with pycolmap.Database.open(db) as database:
+            num_images = database.num_images()
+            num_keypoints = database.num_keypoints()
+            num_cameras = database.num_cameras()
+        if num_images != len(names):
+            raise UserError(f"COLMAP read {num_images} of {len(names)} images in {ws.images_dir}")
+        _log_features(ws, db)
+    return ws.record_step(
+        "features",
+        fp,
+        config=settings | {"images": len(names)},
+        seconds=timer.seconds,
+        summary={"images": num_images, "cameras": num_cameras, "keypoints": num_keypoints},
+    )
+
+
+def _log_features(ws: Workspace, database_path: Path) -> None:
+    with pycolmap.Database.open(database_path) as db, recording.step_recording(
+        ws.log_path("features"), "features"
+    ) as rec:
+        cameras = {c.camera_id: c for c in db.read_all_cameras()}
+        counts = []
+        for image in sorted(db.read_all_images(), key=lambda im: im.name):
+            cam = cameras[image.camera_id]
+            keypoints = db.read_keypoints(image.image_id)
+            counts.append(len(keypoints))
+            recording.log_camera_image(
+                rec,
+                image_name=image.name,
+                image_path=ws.images_dir / image.name,
+                K=cam.calibration_matrix(),
+                width=cam.width,
+                height=cam.height,
+                # COLMAP keypoints have pixel centres at +0.5; Rerun's 2D space too.
+                points2D=keypoints[:, :2],
+            )
+        recording.log_series(rec, "image", "stats/keypoints_per_image", counts)
+
+
+# Matches -------------------------------------------------------------------------------------
+def match_features(ws: Workspace, config: SfMConfig, *, overwrite: bool = False) -> StepRecord:
+    upstream = ws.step("features")
+    if upstream is None or not ws.database_path.exists():
+        raise UserError(f"{ws.root}: no features yet; run `mocap sfm {ws.root}`")
+    num_images = upstream.summary["images"]
+    matcher = config.matcher
+    if matcher is Matcher.AUTO:
+        matcher = Matcher.EXHAUSTIVE if num_images <= EXHAUSTIVE_MAX_IMAGES else Matcher.SEQUENTIAL
+    settings = {"matcher": str(matcher), "sequential_overlap": config.sequential_overlap}
+    fp = fingerprint("matches", settings, upstream.fingerprint)
+    if not overwrite and ws.is_done("matches", fp, ws.database_path):
+        return ws.step("matches")  # type: ignore[return-value]
+
+    matching = pycolmap.FeatureMatchingOptions()
+    matching.num_threads = config.num_threads
+    with Timer() as timer, atomic_output(ws.database_path, seed_from=ws.database_path) as db:
+        with pycolmap.Database.open(db) as database:
+            # Stale matches from other settings would be kept by COLMAP, which skips known pairs.
+            database.clear_matches()
+            database.clear_two_view_geometries()
+        if matcher is Matcher.EXHAUSTIVE:
+            total = num_images * (num_images - 1) // 2
+            with polled(total, "matching", "pair", count_rows(db, "two_view_geometries")):
+                pycolmap.match_exhaustive(db, matching_options=matching, device=_device())
+        else:
+            pairing = pycolmap.SequentialPairingOptions()
+            pairing.overlap = config.sequential_overlap
+            total = num_images * min(config.sequential_overlap, num_images - 1)
+            with polled(total, "matching", "pair", count_rows(db, "two_view_geometries")):
+                pycolmap.match_sequential(
+                    db, matching_options=matching, pairing_options=pairing, device=_device()
+                )
+        pairs = verified_pairs(db)
+        _log_matches(ws, pairs)
+    verified = [p for p in pairs if p["inliers"] > 0]
+    return ws.record_step(
+        "matches",
+        fp,
+        config=settings,
+        seconds=timer.seconds,
+        summary={"pairs": len(pairs), "verified_pairs": len(verified)},
+    )
+
+
+def verified_pairs(database_path: Path) -> list[dict[str, Any]]:
+    """Every matched image pair with its verified inlier count and geometry type."""
+    with pycolmap.Database.open(database_path) as db:
+        names = {im.image_id: im.name for im in db.read_all_images()}
+        pair_ids, geometries = db.read_two_view_geometries()
+    rows = []
+    for pair_id, geometry in zip(pair_ids, geometries, strict=True):
+        i, j = pycolmap.pair_id_to_image_pair(pair_id)
+        rows.append(
+            {
+                "image_i": names[i],
+                "image_j": names[j],
+                "inliers": len(geometry.inlier_matches),
+                "config": pycolmap.TwoViewGeometryConfiguration(int(geometry.config)).name,
+            }
+        )
+    return sorted(rows, key=lambda r: (r["image_i"], r["image_j"]))
+
+
+def _log_matches(ws: Workspace, pairs: list[dict[str, Any]]) -> None:
+    with recording.step_recording(ws.log_path("matches"), "matches") as rec:
+        recording.log_series(rec, "pair", "stats/inliers_per_pair", [p["inliers"] for p in pairs])
+        recording.log_table(rec, "tables/pairs", "Verified image pairs", pairs)
+
+
+# Intrinsics ----------------------------------------------------------------------------------
+def database_cameras(database_path: Path) -> tuple[CameraInfo, ...]:
+    with pycolmap.Database.open(database_path) as db:
+        by_camera: dict[int, list[str]] = defaultdict(list)
+        for image in db.read_all_images():
+            by_camera[image.camera_id].append(image.name)
+        return tuple(
+            CameraInfo(
+                camera_id=c.camera_id,
+                model=c.model.name,
+                width=c.width,
+                height=c.height,
+                image_names=tuple(sorted(by_camera[c.camera_id])),
+            )
+            for c in sorted(db.read_all_cameras(), key=lambda c: c.camera_id)
+        )
+
+
+def initialise_intrinsics(
+    ws: Workspace, config: SfMConfig, *, overwrite: bool = False
+) -> StepRecord:
+    upstream = ws.step("matches")
+    if upstream is None:
+        raise UserError(f"{ws.root}: no matches yet; run `mocap sfm {ws.root}`")
+    settings = {"intrinsics": config.intrinsics, "options": list(config.intrinsics_options)}
+    fp = fingerprint("intrinsics", settings, upstream.fingerprint)
+    if not overwrite and ws.is_done("intrinsics", fp, ws.database_path):
+        return ws.step("intrinsics")  # type: ignore[return-value]
+
+    try:
+        initialiser = plugins.create("intrinsics", config.intrinsics, config.intrinsics_options)
+    except plugins.PluginError as exc:
+        raise UserError(str(exc)) from None
+    with Timer() as timer, atomic_output(ws.database_path, seed_from=ws.database_path) as db:
+        cameras = database_cameras(db)
+        result: IntrinsicsResult = initialiser.initialise(
+            IntrinsicsContext(database_path=db, images_dir=ws.images_dir, cameras=cameras)
+        )
+        applied = _write_focal_priors(db, result)
+        with recording.step_recording(ws.log_path("intrinsics"), "intrinsics") as rec:
+            recording.log_table(rec, "tables/intrinsics", f"Focal priors ({config.intrinsics})",
+                                applied)
+    return ws.record_step(
+        "intrinsics",
+        fp,
+        config=settings,
+        seconds=timer.seconds,
+        summary={
+            "cameras": applied,
+            "refine_focal": result.refine_focal,
+            "notes": list(result.notes),
+            "details": dict(result.details),
+        },
+    )
+
+
+def _write_focal_priors(database_path: Path, result: IntrinsicsResult) -> list[dict[str, Any]]:
+    by_id = {p.camera_id: p for p in result.priors}
+    applied = []
+    with pycolmap.Database.open(database_path) as db:
+        for camera in db.read_all_cameras():
+            prior = by_id.get(camera.camera_id)
+            if prior is None:
+                raise UserError(f"intrinsics plugin gave no focal for camera {camera.camera_id}")
+            if prior.focal_px is None:
+                # COLMAP's own starting guess, and no prior: the mapper may re-estimate it.
+                camera.focal_length = 1.2 * max(camera.width, camera.height)
+                camera.has_prior_focal_length = False
+            else:
+                if not (np.isfinite(prior.focal_px) and prior.focal_px > 0):
+                    raise UserError(
+                        f"intrinsics plugin gave focal {prior.focal_px} for camera "
+                        f"{camera.camera_id}; expected a positive number of pixels"
+                    )
+                camera.focal_length = float(prior.focal_px)
+                camera.has_prior_focal_length = True
+            db.update_camera(camera)
+            applied.append(
+                {
+                    "camera_id": camera.camera_id,
+                    "focal_px": float(camera.focal_length),
+                    "prior": prior.focal_px is not None,
+                    "source": prior.source,
+                }
+            )
+    return applied
+
+
+# Mapping -------------------------------------------------------------------------------------
+def map_sparse(ws: Workspace, config: SfMConfig, *, overwrite: bool = False) -> StepRecord:
+    upstream = ws.step("intrinsics")
+    if upstream is None:
+        raise UserError(f"{ws.root}: intrinsics not initialised; run `mocap sfm {ws.root}`")
+    refine = config.refine_focal
+    if refine is None:
+        refine = upstream.summary["refine_focal"]
+    settings = {"refine_focal": refine, "seed": config.seed}
+    fp = fingerprint("mapping", settings, upstream.fingerprint)
+    if not overwrite and ws.is_done("mapping", fp, ws.model_dir):
+        return ws.step("mapping")  # type: ignore[return-value]
+
+    pycolmap.set_random_seed(config.seed)
+    options = pycolmap.IncrementalPipelineOptions()
+    options.num_threads = config.num_threads
+    options.random_seed = config.seed
+    # COLMAP's incremental pipeline ends each model with a global bundle adjustment (unless the
+    # last one already was global), so this step is mapping *and* bundle adjustment.
+    options.ba_refine_focal_length = refine
+    options.mapper.abs_pose_refine_focal_length = refine
+    num_images = len(ws.image_names())
+    with Timer() as timer, atomic_output(ws.sparse_dir) as out:
+        raw = out / "unsorted"
+        raw.mkdir(parents=True)
+        with recording.step_recording(ws.log_path("mapping"), "mapping") as rec:
+            progress = bar(num_images, "mapping", "img")
+            registered = [0]
+
+            def on_image() -> None:
+                registered[0] += 1
+                progress.update(1)
+                recording.log_scalar(
+                    rec, "registration", registered[0], "stats/registered_images", registered[0]
+                )
+
+            try:
+                models = pycolmap.incremental_mapping(
+                    ws.database_path, ws.images_dir, raw, options=options,
+                    next_image_callback=on_image,
+                )
+            finally:
+                progress.close()
+            if not models:
+                raise UserError(
+                    f"mapping registered no images in {ws.root}: the photos do not overlap "
+                    "enough (see logs/matches.rrd for verified pairs)"
+                )
+            ordered = sorted(models.values(), key=lambda r: r.num_reg_images(), reverse=True)
+            for index, model in enumerate(ordered):
+                (out / str(index)).mkdir()
+                model.write(out / str(index))
+            shutil.rmtree(raw)
+            summary = model_summary(ordered[0], num_images) | {"models": len(ordered)}
+            _log_model(rec, ws, ordered[0])
+    return ws.record_step("mapping", fp, config=settings, seconds=timer.seconds, summary=summary)
+
+
+def model_summary(model: pycolmap.Reconstruction, num_images: int) -> dict[str, Any]:
+    return {
+        "images": num_images,
+        "registered": model.num_reg_images(),
+        "points": model.num_points3D(),
+        "mean_reprojection_error_px": model.compute_mean_reprojection_error(),
+        "mean_track_length": model.compute_mean_track_length(),
+        "cameras": [
+            {
+                "camera_id": cam_id,
+                "model": cam.model.name,
+                "width": cam.width,
+                "height": cam.height,
+                "params": [float(v) for v in cam.params],
+                "focal_px": float(cam.mean_focal_length()),
+            }
+            for cam_id, cam in sorted(model.cameras.items())
+        ],
+    }
+
+
+def cams_from_world(model: pycolmap.Reconstruction) -> dict[str, np.ndarray]:
+    """Registered images' poses: name → (3, 4) ``cam_from_world`` [R | t]."""
+    return {
+        im.name: im.cam_from_world().matrix()
+        for im in model.images.values()
+        if im.has_pose
+    }
+
+
+def per_image_reprojection_error(model: pycolmap.Reconstruction) -> dict[str, float]:
+    """Mean reprojection error in pixels of each registered image's triangulated points."""
+    errors: dict[str, float] = {}
+    for image in model.images.values():
+        if not image.has_pose:
+            continue
+        residuals = []
+        for p2d in image.points2D:
+            if p2d.has_point3D():
+                projected = image.project_point(model.points3D[p2d.point3D_id].xyz)
+                if projected is not None:
+                    residuals.append(np.linalg.norm(projected - p2d.xy))
+        errors[image.name] = float(np.mean(residuals)) if residuals else float("nan")
+    return errors
+
+
+def _log_model(rec: Any, ws: Workspace, model: pycolmap.Reconstruction) -> None:
+    ids = sorted(model.points3D)
+    if ids:
+        xyz = np.array([model.points3D[i].xyz for i in ids])
+        rgb = np.array([model.points3D[i].color for i in ids], dtype=np.uint8)
+        recording.log_points(rec, xyz, rgb)
+    for image in sorted(model.images.values(), key=lambda im: im.name):
+        if not image.has_pose:
+            continue
+        cam = model.cameras[image.camera_id]
+        observed = np.array([p.xy for p in image.points2D if p.has_point3D()]).reshape(-1, 2)
+        recording.log_camera_image(
+            rec,
+            image_name=image.name,
+            image_path=ws.images_dir / image.name,
+            K=cam.calibration_matrix(),
+            width=cam.width,
+            height=cam.height,
+            cam_from_world=image.cam_from_world().matrix(),
+            points2D=observed,
+        )
+    errors = per_image_reprojection_error(model)
+    names = sorted(errors)
+    recording.log_series(rec, "image", "stats/reprojection_error_px", [errors[n] for n in names])
+    recording.log_table(
+        rec,
+        "tables/images",
+        "Registered images",
+        [{"index": i, "image": n, "reprojection_error_px": errors[n]} for i, n in enumerate(names)],
+    )
+
+
+# The whole chain -----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SfMSummary:
+    workspace: Path
+    steps: dict[str, StepRecord]
+    reused: tuple[str, ...]
+
+    @property
+    def mapping(self) -> dict[str, Any]:
+        return self.steps["mapping"].summary
+
+    def lines(self) -> list[str]:
+        m = self.mapping
+        intr = self.steps["intrinsics"]
+        out = [
+            f"workspace   {self.workspace}",
+            f"registered  {m['registered']} of {m['images']} images"
+            + (f" (largest of {m['models']} models)" if m["models"] > 1 else ""),
+            f"points      {m['points']}  (mean track length {m['mean_track_length']:.2f})",
+            f"reprojection error  {m['mean_reprojection_error_px']:.3f} px (mean)",
+        ]
+        priors = {c["camera_id"]: c for c in intr.summary["cameras"]}
+        for cam in m["cameras"][:4]:
+            prior = priors.get(cam["camera_id"], {})
+            out.append(
+                f"camera {cam['camera_id']}    {cam['model']} {cam['width']}x{cam['height']}"
+                f"  focal {cam['focal_px']:.1f} px  (start {prior.get('focal_px', 0):.1f}, "
+                f"{prior.get('source', '?')})"
+            )
+        if len(m["cameras"]) > 4:
+            out.append(f"            ... and {len(m['cameras']) - 4} more cameras")
+        for note in intr.summary.get("notes", []):
+            out.append(f"note        {note}")
+        times = "  ".join(
+            f"{name} {rec.seconds:.1f}s" + (" (reused)" if name in self.reused else "")
+            for name, rec in self.steps.items()
+        )
+        out += [
+            f"time        {times}",
+            f"model       {self.workspace / 'sparse' / '0'}  (COLMAP binary)",
+            f"view        mocap view {self.workspace}",
+        ]
+        return out
+
+
+STEPS = (
+    ("features", extract_features),
+    ("matches", match_features),
+    ("intrinsics", initialise_intrinsics),
+    ("mapping", map_sparse),
+)
+
+
+def run_sfm(ws: Workspace, config: SfMConfig, *, overwrite: bool = False) -> SfMSummary:
+    """All SfM steps in order; each resumes from what the workspace already holds."""
+    steps: dict[str, StepRecord] = {}
+    reused = []
+    for name, step in STEPS:
+        before = ws.step(name)
+        steps[name] = step(ws, config, overwrite=overwrite)
+        if before is not None and before == steps[name]:
+            reused.append(name)
+    return SfMSummary(ws.root, steps, tuple(reused))

@@ -1,0 +1,277 @@
+"""The workspace on disk, owned by one class.
+
+Layout (COLMAP's own, so its GUI and tools open it)::
+
+    WS/
+      images/            photos, hard-linked or copied from the source folder, never modified
+      database.db        COLMAP database: cameras, keypoints, matches, two-view geometries
+      sparse/0/          largest COLMAP binary model (sparse/1, ... for other models)
+      logs/<step>.rrd    one Rerun recording per step
+      run.json           config, package versions and timing of every step
+
+A step is a function from a workspace to files in it. It is idempotent: it is skipped when its
+output exists and its recorded fingerprint (its config plus its inputs' fingerprints) matches.
+Outputs are written to a ``.partial`` sibling and renamed into place, so an interrupted step
+never leaves a file that a later step would trust.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import platform
+import shutil
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Any
+
+from recon.errors import UserError
+from recon.images import IMAGE_SUFFIXES, scan_images
+
+RUN_FORMAT = "mocap-workspace-v1"
+
+_PACKAGES = (
+    "mocap-recon", "pycolmap", "open3d", "numpy", "opencv-python-headless",
+    "pymeshlab", "rerun-sdk", "scipy",
+)
+
+
+def package_versions() -> dict[str, str]:
+    versions = {"python": platform.python_version()}
+    for name in _PACKAGES:
+        try:
+            versions[name] = version(name)
+        except PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions
+
+
+def fingerprint(*parts: Any) -> str:
+    """Stable short hash of JSON-serialisable parts (configs and upstream fingerprints)."""
+    text = json.dumps(parts, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def write_json_atomic(path: Path, data: Any) -> None:
+    tmp = path.with_name(path.name + ".partial")
+    tmp.write_text(json.dumps(data, indent=2, default=str) + "\n")
+    os.replace(tmp, path)
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    elif path.exists() or path.is_symlink():
+        path.unlink()
+
+
+@contextlib.contextmanager
+def atomic_output(target: Path, *, seed_from: Path | None = None) -> Iterator[Path]:
+    """Yield a temporary path next to ``target``; on success it replaces ``target``.
+
+    ``seed_from`` copies an existing file first, for steps that update a file in place (the
+    COLMAP database). On failure the temporary path is removed and ``target`` is untouched.
+    """
+    tmp = target.with_name(target.name + ".partial")
+    _remove(tmp)
+    if seed_from is not None:
+        shutil.copy2(seed_from, tmp)
+    try:
+        yield tmp
+    except BaseException:
+        _remove(tmp)
+        raise
+    if tmp.is_dir():
+        # A directory cannot be atomically swapped over a non-empty one: move the old one aside
+        # first, so that at every instant either the old or the new model is complete.
+        old = target.with_name(target.name + ".old")
+        _remove(old)
+        if target.exists():
+            os.replace(target, old)
+        os.replace(tmp, target)
+        _remove(old)
+    else:
+        os.replace(tmp, target)
+
+
+@dataclass(frozen=True)
+class StepRecord:
+    name: str
+    fingerprint: str
+    seconds: float
+    config: dict[str, Any]
+    summary: dict[str, Any]
+
+
+class Workspace:
+    """Paths, run record and image import of one workspace folder."""
+
+    def __init__(self, root: Path | str):
+        self.root = Path(root)
+
+    # Paths -------------------------------------------------------------------------------
+    @property
+    def images_dir(self) -> Path:
+        return self.root / "images"
+
+    @property
+    def database_path(self) -> Path:
+        return self.root / "database.db"
+
+    @property
+    def sparse_dir(self) -> Path:
+        return self.root / "sparse"
+
+    @property
+    def model_dir(self) -> Path:
+        """The largest sparse model, ``sparse/0``."""
+        return self.sparse_dir / "0"
+
+    @property
+    def logs_dir(self) -> Path:
+        return self.root / "logs"
+
+    @property
+    def run_json(self) -> Path:
+        return self.root / "run.json"
+
+    def log_path(self, step: str) -> Path:
+        self.logs_dir.mkdir(parents=True, exist_ok=True)
+        return self.logs_dir / f"{step}.rrd"
+
+    def recordings(self) -> list[Path]:
+        return sorted(self.logs_dir.glob("*.rrd")) if self.logs_dir.is_dir() else []
+
+    # Creation ----------------------------------------------------------------------------
+    @classmethod
+    def open(cls, root: Path | str) -> Workspace:
+        """An existing workspace; a one-line error when the folder is not one."""
+        ws = cls(root)
+        if ws.root.exists() and not ws.root.is_dir():
+            raise UserError(f"workspace path {ws.root} is a file, not a folder")
+        if not ws.images_dir.is_dir():
+            raise UserError(
+                f"{ws.root} is not a workspace (no images/ folder); "
+                f"create one with: mocap init {ws.root} --images DIR"
+            )
+        return ws
+
+    @classmethod
+    def create(
+        cls, root: Path | str, images: Path | str, *, copy: bool = False, overwrite: bool = False
+    ) -> tuple[Workspace, list[str]]:
+        """Make a workspace from a folder of photos; returns it and notes on skipped files.
+
+        Photos are hard-linked when source and workspace share a file system, else copied
+        (``copy=True`` always copies). Sources are only read, never modified. Images are found
+        recursively and keep their relative paths as COLMAP image names.
+        """
+        ws = cls(root)
+        if ws.root.exists() and not ws.root.is_dir():
+            raise UserError(f"workspace path {ws.root} is a file, not a folder")
+        source = Path(images)
+        # A workspace inside the photo folder must not import its own files on a re-run.
+        inside = source.resolve().is_relative_to(ws.root.resolve())
+        found, notes = scan_images(source, exclude=ws.images_dir if inside else ws.root)
+        if ws.images_dir.exists():
+            existing = ws.image_names()
+            if existing == [name for name, _ in found] and not overwrite:
+                return ws, [*notes, f"{ws.images_dir} already holds these images; reused"]
+            if not overwrite:
+                raise UserError(
+                    f"{ws.images_dir} already holds other images; "
+                    "use a new workspace or --overwrite"
+                )
+        ws.root.mkdir(parents=True, exist_ok=True)
+        with atomic_output(ws.images_dir) as tmp:
+            tmp.mkdir()
+            for name, src in found:
+                dst = tmp / name
+                dst.parent.mkdir(parents=True, exist_ok=True)
+                if copy:
+                    shutil.copy2(src, dst)
+                else:
+                    try:
+                        os.link(src, dst)
+                    except OSError:
+                        shutil.copy2(src, dst)
+        # New images invalidate everything derived from the old ones.
+        for stale in (ws.database_path, ws.sparse_dir, ws.run_json):
+            _remove(stale)
+        ws._write_run({"format": RUN_FORMAT, "source_images": str(source.resolve()), "steps": {}})
+        return ws, notes
+
+    def image_names(self) -> list[str]:
+        """COLMAP image names (paths relative to images/, with forward slashes), sorted."""
+        if not self.images_dir.is_dir():
+            return []
+        return sorted(
+            p.relative_to(self.images_dir).as_posix()
+            for p in self.images_dir.rglob("*")
+            if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES
+        )
+
+    # Run record --------------------------------------------------------------------------
+    def read_run(self) -> dict[str, Any]:
+        if not self.run_json.exists():
+            return {"format": RUN_FORMAT, "steps": {}}
+        try:
+            return json.loads(self.run_json.read_text())
+        except json.JSONDecodeError as exc:
+            raise UserError(
+                f"{self.run_json} is not valid JSON ({exc}); delete it to rerun"
+            ) from None
+
+    def _write_run(self, run: dict[str, Any]) -> None:
+        run["versions"] = package_versions()
+        run["updated"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
+        write_json_atomic(self.run_json, run)
+
+    def step(self, name: str) -> StepRecord | None:
+        rec = self.read_run().get("steps", {}).get(name)
+        if rec is None:
+            return None
+        return StepRecord(name, rec["fingerprint"], rec["seconds"], rec["config"], rec["summary"])
+
+    def is_done(self, name: str, step_fingerprint: str, *outputs: Path) -> bool:
+        rec = self.step(name)
+        return (
+            rec is not None
+            and rec.fingerprint == step_fingerprint
+            and all(p.exists() for p in outputs)
+        )
+
+    def record_step(
+        self,
+        name: str,
+        step_fingerprint: str,
+        *,
+        config: dict[str, Any],
+        seconds: float,
+        summary: dict[str, Any] | None = None,
+    ) -> StepRecord:
+        run = self.read_run()
+        run.setdefault("steps", {})[name] = {
+            "fingerprint": step_fingerprint,
+            "seconds": round(seconds, 3),
+            "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "config": config,
+            "summary": summary or {},
+        }
+        self._write_run(run)
+        return StepRecord(name, step_fingerprint, seconds, config, summary or {})
+
+
+class Timer:
+    def __enter__(self) -> Timer:
+        self.start = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.seconds = time.perf_counter() - self.start

@@ -1,0 +1,99 @@
+"""Bad input through the real `mocap` command: exit code 2, one line naming the cause."""
+
+from __future__ import annotations
+
+import numpy as np
+from PIL import Image
+
+from tests.helpers import run_cli
+
+
+def _assert_one_line_error(result, *needles: str) -> None:
+    assert result.returncode == 2, (result.stdout, result.stderr)
+    assert "Traceback" not in result.stderr
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    error = [line for line in lines if "error:" in line]
+    assert len(error) == 1, result.stderr
+    for needle in needles:
+        assert needle in error[0], error[0]
+
+
+def _noise_images(folder, count, size=(160, 120), seed=0):
+    folder.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    for i in range(count):
+        pixels = rng.integers(0, 255, (size[1], size[0], 3), dtype=np.uint8)
+        Image.fromarray(pixels).save(folder / f"img{i}.png")
+
+
+def test_empty_folder(tmp_path):
+    (tmp_path / "photos").mkdir()
+    _assert_one_line_error(run_cli("init", tmp_path / "ws", "--images", tmp_path / "photos"),
+                           "no images in")
+
+
+def test_missing_folder(tmp_path):
+    _assert_one_line_error(run_cli("init", tmp_path / "ws", "--images", tmp_path / "nope"),
+                           "does not exist")
+
+
+def test_corrupt_image_is_named_and_sources_untouched(tmp_path):
+    photos = tmp_path / "photos"
+    _noise_images(photos, 2)
+    (photos / "broken.jpg").write_bytes(b"\xff\xd8\xff\xe0 this is not a jpeg")
+    before = sorted((p.name, p.read_bytes()) for p in photos.iterdir())
+    _assert_one_line_error(run_cli("sfm", tmp_path / "ws", "--images", photos), "broken.jpg")
+    assert sorted((p.name, p.read_bytes()) for p in photos.iterdir()) == before
+
+
+def test_single_image(tmp_path):
+    _noise_images(tmp_path / "photos", 1)
+    _assert_one_line_error(run_cli("init", tmp_path / "ws", "--images", tmp_path / "photos"),
+                           "at least 2")
+
+
+def test_workspace_is_a_file(tmp_path):
+    _noise_images(tmp_path / "photos", 2)
+    (tmp_path / "ws").write_text("")
+    _assert_one_line_error(run_cli("init", tmp_path / "ws", "--images", tmp_path / "photos"),
+                           "is a file")
+    _assert_one_line_error(run_cli("sfm", tmp_path / "ws"), "is a file")
+
+
+def test_sfm_on_a_folder_that_is_not_a_workspace(tmp_path):
+    _assert_one_line_error(run_cli("sfm", tmp_path), "not a workspace")
+
+
+def test_photos_that_do_not_overlap(tmp_path):
+    """Unrelated noise images: nothing to register, and no model is left behind."""
+    _noise_images(tmp_path / "photos", 3)
+    result = run_cli("sfm", tmp_path / "ws", "--images", tmp_path / "photos")
+    _assert_one_line_error(result, "registered no images")
+    assert not (tmp_path / "ws" / "sparse").exists()
+
+
+def test_unknown_plugin_and_bad_option(tmp_path):
+    _noise_images(tmp_path / "photos", 2)
+    run_cli("init", tmp_path / "ws", "--images", tmp_path / "photos")
+    _assert_one_line_error(run_cli("sfm", tmp_path / "ws", "--intrinsics", "nope"),
+                           "unknown intrinsics plugin 'nope'")
+    _assert_one_line_error(run_cli("sfm", tmp_path / "ws", "--intrinsics", "fixed"),
+                           "focal_px")
+
+
+def test_plugins_lists_every_kind():
+    result = run_cli("plugins")
+    assert result.returncode == 0
+    for name in ("intrinsics", "colmap-default", "exif", "fixed"):
+        assert name in result.stdout
+
+
+def test_view_without_display_prints_the_command(tmp_path):
+    _noise_images(tmp_path / "photos", 2)
+    run_cli("init", tmp_path / "ws", "--images", tmp_path / "photos")
+    _assert_one_line_error(run_cli("view", tmp_path / "ws"), "no recordings")
+    (tmp_path / "ws" / "logs").mkdir()
+    (tmp_path / "ws" / "logs" / "sfm.rrd").write_bytes(b"")
+    result = run_cli("view", tmp_path / "ws")
+    assert result.returncode == 0
+    assert "rerun" in result.stdout and "sfm.rrd" in result.stdout

@@ -1,0 +1,137 @@
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from recon.errors import UserError
+from recon.workspace import Workspace, atomic_output, fingerprint
+
+
+def _photos(folder: Path, count: int = 3, size: tuple[int, int] = (64, 48)) -> list[Path]:
+    folder.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(0)
+    paths = []
+    for i in range(count):
+        path = folder / f"p{i}.png"
+        Image.fromarray(rng.integers(0, 255, (size[1], size[0], 3), dtype=np.uint8)).save(path)
+        paths.append(path)
+    return paths
+
+
+def _digest(path: Path) -> tuple[str, float]:
+    return hashlib.sha256(path.read_bytes()).hexdigest(), path.stat().st_mtime
+
+
+def test_create_links_images_and_never_touches_sources(tmp_path):
+    src = tmp_path / "photos"
+    photos = _photos(src)
+    (src / "notes.txt").write_text("not an image")
+    (src / "sub").mkdir()
+    _photos(src / "sub", count=1)
+    before = {p: _digest(p) for p in photos}
+
+    ws, notes = Workspace.create(tmp_path / "ws", src)
+
+    assert ws.image_names() == ["p0.png", "p1.png", "p2.png", "sub/p0.png"]
+    assert any("notes.txt" in n for n in notes)
+    # Same inode when hard-linked: nothing was re-encoded.
+    assert os.path.samefile(ws.images_dir / "p0.png", src / "p0.png")
+    assert {p: _digest(p) for p in photos} == before
+    run = json.loads(ws.run_json.read_text())
+    assert run["format"] == "mocap-workspace-v1" and "pycolmap" in run["versions"]
+
+
+def test_create_again_with_same_images_reuses(tmp_path):
+    src = tmp_path / "photos"
+    _photos(src)
+    ws, _ = Workspace.create(tmp_path / "ws", src)
+    ws.record_step("features", "abc", config={}, seconds=1.0)
+    ws, notes = Workspace.create(tmp_path / "ws", src)
+    assert any("reused" in n for n in notes)
+    assert ws.step("features") is not None  # derived state kept
+
+
+def test_workspace_inside_the_photo_folder_does_not_import_itself(tmp_path):
+    src = tmp_path / "photos"
+    _photos(src)
+    Workspace.create(src / "ws", src)
+    ws, _ = Workspace.create(src / "ws", src)
+    assert ws.image_names() == ["p0.png", "p1.png", "p2.png"]
+
+
+@pytest.mark.parametrize(
+    ("setup", "message"),
+    [
+        (lambda d: None, "no images in"),
+        (lambda d: _photos(d, count=1), "only one image"),
+        (lambda d: (_photos(d), (d / "bad.jpg").write_bytes(b"\xff\xd8garbage")), "bad.jpg"),
+    ],
+)
+def test_bad_folders_raise_one_line_errors(tmp_path, setup, message):
+    src = tmp_path / "photos"
+    src.mkdir()
+    setup(src)
+    with pytest.raises(UserError, match=message) as info:
+        Workspace.create(tmp_path / "ws", src)
+    assert "\n" not in str(info.value)
+    assert not (tmp_path / "ws" / "images").exists()
+
+
+def test_truncated_image_is_reported(tmp_path):
+    src = tmp_path / "photos"
+    photos = _photos(src, size=(256, 256))
+    Image.open(photos[0]).save(src / "cut.jpg")
+    data = (src / "cut.jpg").read_bytes()
+    (src / "cut.jpg").write_bytes(data[: len(data) // 2])
+    with pytest.raises(UserError, match="cut.jpg"):
+        Workspace.create(tmp_path / "ws", src)
+
+
+def test_workspace_path_that_is_a_file(tmp_path):
+    src = tmp_path / "photos"
+    _photos(src)
+    (tmp_path / "ws").write_text("x")
+    with pytest.raises(UserError, match="is a file"):
+        Workspace.create(tmp_path / "ws", src)
+    with pytest.raises(UserError, match="is a file"):
+        Workspace.open(tmp_path / "ws")
+
+
+def test_open_requires_a_workspace(tmp_path):
+    with pytest.raises(UserError, match="not a workspace"):
+        Workspace.open(tmp_path)
+
+
+def test_atomic_output_keeps_the_old_file_when_the_step_fails(tmp_path):
+    target = tmp_path / "model"
+    target.mkdir()
+    (target / "cameras.bin").write_text("old")
+    with pytest.raises(RuntimeError), atomic_output(target) as tmp:
+        tmp.mkdir()
+        (tmp / "cameras.bin").write_text("half")
+        raise RuntimeError("interrupted")
+    assert (target / "cameras.bin").read_text() == "old"
+    assert not (tmp_path / "model.partial").exists()
+    with atomic_output(target) as tmp:
+        tmp.mkdir()
+        (tmp / "cameras.bin").write_text("new")
+    assert (target / "cameras.bin").read_text() == "new"
+
+
+def test_steps_are_done_only_with_matching_fingerprint_and_outputs(tmp_path):
+    ws = Workspace(tmp_path)
+    out = tmp_path / "out.txt"
+    fp = fingerprint("step", {"a": 1})
+    assert fp == fingerprint("step", {"a": 1}) != fingerprint("step", {"a": 2})
+    ws.record_step("step", fp, config={"a": 1}, seconds=0.5, summary={"n": 3})
+    assert not ws.is_done("step", fp, out)  # output missing
+    out.write_text("x")
+    assert ws.is_done("step", fp, out)
+    assert not ws.is_done("step", fingerprint("step", {"a": 2}), out)
+    assert ws.step("step").summary == {"n": 3}

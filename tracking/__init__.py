@@ -1,0 +1,1 @@
+"""Body model, silhouettes, renderers, the silhouette-tracking optimiser and motion reports."""
