@@ -58,16 +58,23 @@ def entity_name(image_name: str) -> str:
 
 
 def _encoded_image(path: Path, scale: float) -> rr.EncodedImage | None:
-    """The photo as JPEG, or None when it is not on disk (a model made without photos)."""
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR) if path.is_file() else None
+    """The photo for the viewer, or None when it is not on disk (a model made without photos).
+
+    Small JPEG and PNG files are logged as their own bytes (no decode, no quality loss); larger
+    ones are downscaled and re-encoded as JPEG to keep recordings small.
+    """
+    if not path.is_file():
+        return None
+    media = {".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".png": "image/png"}
+    if scale >= 1.0 and path.suffix.lower() in media:
+        return rr.EncodedImage(contents=path.read_bytes(), media_type=media[path.suffix.lower()])
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if image is None:
         return None
     if scale < 1.0:
         image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
     ok, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 90])
-    if not ok:
-        raise OSError(f"cannot encode {path}")
-    return rr.EncodedImage(contents=data.tobytes(), media_type="image/jpeg")
+    return rr.EncodedImage(contents=data.tobytes(), media_type="image/jpeg") if ok else None
 
 
 def _display_scale(width: int, height: int) -> float:

@@ -26,12 +26,12 @@ from typing import Any
 
 import numpy as np
 import pycolmap
-from PIL import Image
 
 import plugins
 from plugins.protocols import CameraInfo, IntrinsicsContext, IntrinsicsResult
 from recon import recording
 from recon.errors import UserError
+from recon.images import camera_key
 from recon.progress import bar, count_rows, polled
 from recon.workspace import StepRecord, Timer, Workspace, atomic_output, fingerprint
 
@@ -126,18 +126,10 @@ def _device() -> pycolmap.Device:
 
 
 # Features ------------------------------------------------------------------------------------
-def _camera_key(path: Path) -> tuple:
-    """What must agree for two photos to share intrinsics: size, camera body, focal length."""
-    with Image.open(path) as im:
-        exif = im.getexif()
-        sub = exif.get_ifd(0x8769)
-        return (im.size, exif.get(0x010F), exif.get(0x0110), str(sub.get(0x920A)))
-
-
 def resolve_camera_mode(ws: Workspace, mode: CameraMode) -> CameraMode:
     if mode is not CameraMode.AUTO:
         return mode
-    keys = {_camera_key(ws.images_dir / n) for n in ws.image_names()}
+    keys = {camera_key(ws.images_dir / n) for n in ws.image_names()}
     return CameraMode.SINGLE if len(keys) == 1 else CameraMode.PER_IMAGE
 
 

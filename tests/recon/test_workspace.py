@@ -83,13 +83,15 @@ def test_bad_folders_raise_one_line_errors(tmp_path, setup, message):
     assert not (tmp_path / "ws" / "images").exists()
 
 
-def test_truncated_image_is_reported(tmp_path):
+@pytest.mark.parametrize("suffix", [".jpg", ".png"])
+def test_truncated_image_is_reported(tmp_path, suffix):
     src = tmp_path / "photos"
     photos = _photos(src, size=(256, 256))
-    Image.open(photos[0]).save(src / "cut.jpg")
-    data = (src / "cut.jpg").read_bytes()
-    (src / "cut.jpg").write_bytes(data[: len(data) // 2])
-    with pytest.raises(UserError, match="cut.jpg"):
+    cut = src / f"cut{suffix}"
+    Image.open(photos[0]).save(cut)
+    data = cut.read_bytes()
+    cut.write_bytes(data[: len(data) // 2])
+    with pytest.raises(UserError, match=cut.name):
         Workspace.create(tmp_path / "ws", src)
 
 

@@ -1,0 +1,85 @@
+"""Wall time of `mocap sfm` against the bare pycolmap calls it wraps, on the same photos.
+
+Both run as fresh processes, alternating, so import time, disk cache and machine load hit
+them alike. Ours includes everything a user gets on top: image checks, atomic writes, run
+record, progress bars, and the Rerun recordings of every step.
+
+    .venv/bin/python benchmarks/sfm_overhead.py [--images DIR] [--repeats 3]
+
+Default photos: ../shared/data/temple_sparse_ring, else a generated synthetic scene.
+Target: ratio ≤ 1.05.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+TEMPLE = ROOT.parent / "shared" / "data" / "temple_sparse_ring"
+
+# The same calls with the same settings as `mocap sfm` (one shared camera, SIMPLE_RADIAL,
+# exhaustive matching, incremental mapping whose last stage is a global bundle adjustment).
+BARE = """
+import sys
+from pathlib import Path
+import pycolmap
+pycolmap.logging.minloglevel = 2
+images, out = Path(sys.argv[1]), Path(sys.argv[2])
+names = sorted(p.name for p in images.iterdir()
+               if p.suffix.lower() in {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"})
+db = out / "database.db"
+pycolmap.set_random_seed(0)
+pycolmap.extract_features(db, images, image_names=names, camera_mode=pycolmap.CameraMode.SINGLE,
+                          device=pycolmap.Device.cpu)
+pycolmap.match_exhaustive(db, device=pycolmap.Device.cpu)
+options = pycolmap.IncrementalPipelineOptions()
+options.random_seed = 0
+(out / "sparse").mkdir()
+models = pycolmap.incremental_mapping(db, images, out / "sparse", options=options)
+print(max(m.num_reg_images() for m in models.values()))
+"""
+
+
+def _timed(command: list[str]) -> float:
+    start = time.perf_counter()
+    subprocess.run(command, check=True, capture_output=True, text=True)
+    return time.perf_counter() - start
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--images", type=Path, default=None)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        images = args.images
+        if images is None and TEMPLE.is_dir():
+            images = TEMPLE
+        if images is None:
+            from recon.synthetic import SyntheticSceneConfig, render_scene, write_scene
+
+            images = tmp / "scene" / "images"
+            write_scene(render_scene(SyntheticSceneConfig()), images, tmp / "scene" / "t.json")
+        ours, bare = [], []
+        for i in range(args.repeats):
+            ws, out = tmp / f"ws{i}", tmp / f"bare{i}"
+            out.mkdir()
+            ours.append(_timed([sys.executable, "-m", "recon.cli", "sfm", str(ws),
+                                "--images", str(images)]))
+            bare.append(_timed([sys.executable, "-c", BARE, str(images), str(out)]))
+    t_ours, t_bare = statistics.median(ours), statistics.median(bare)
+    print(f"images: {images}")
+    print(f"mocap sfm      median {t_ours:.2f} s  ({', '.join(f'{t:.2f}' for t in ours)})")
+    print(f"bare pycolmap  median {t_bare:.2f} s  ({', '.join(f'{t:.2f}' for t in bare)})")
+    print(f"ratio mocap/pycolmap: {t_ours / t_bare:.3f}  (target <= 1.05)")
+
+
+if __name__ == "__main__":
+    main()
