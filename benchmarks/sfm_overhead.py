@@ -55,7 +55,7 @@ def _timed(command: list[str]) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--images", type=Path, default=None)
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -74,11 +74,14 @@ def main() -> None:
             ours.append(_timed([sys.executable, "-m", "recon.cli", "sfm", str(ws),
                                 "--images", str(images)]))
             bare.append(_timed([sys.executable, "-c", BARE, str(images), str(out)]))
-    t_ours, t_bare = statistics.median(ours), statistics.median(bare)
     print(f"images: {images}")
-    print(f"mocap sfm      median {t_ours:.2f} s  ({', '.join(f'{t:.2f}' for t in ours)})")
-    print(f"bare pycolmap  median {t_bare:.2f} s  ({', '.join(f'{t:.2f}' for t in bare)})")
-    print(f"ratio mocap/pycolmap: {t_ours / t_bare:.3f}  (target <= 1.05)")
+    for label, times in (("mocap sfm", ours), ("bare pycolmap", bare)):
+        print(f"{label:<14} min {min(times):.2f} s  median {statistics.median(times):.2f} s  "
+              f"({', '.join(f'{t:.2f}' for t in times)})")
+    # Other load on a shared machine only ever adds time, so the minimum is the best estimate of
+    # each command's own cost; the median ratio is printed too.
+    print(f"ratio mocap/pycolmap (min):    {min(ours) / min(bare):.3f}  (target <= 1.05)")
+    print(f"ratio mocap/pycolmap (median): {statistics.median(ours) / statistics.median(bare):.3f}")
 
 
 if __name__ == "__main__":

@@ -18,7 +18,9 @@ fingerprints of the steps it reads) matches the one recorded in ``run.json``.
 from __future__ import annotations
 
 import enum
+import importlib
 import shutil
+import threading
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,7 +31,6 @@ import pycolmap
 
 import plugins
 from plugins.protocols import CameraInfo, IntrinsicsContext, IntrinsicsResult
-from recon import recording
 from recon.errors import UserError
 from recon.images import camera_key
 from recon.progress import bar, count_rows, polled
@@ -185,6 +186,8 @@ def extract_features(ws: Workspace, config: SfMConfig, *, overwrite: bool = Fals
 
 
 def _log_features(ws: Workspace, database_path: Path) -> None:
+    from recon import recording
+
     with pycolmap.Database.open(database_path) as db, recording.step_recording(
         ws.log_path("features"), "features"
     ) as rec:
@@ -272,6 +275,8 @@ def verified_pairs(database_path: Path) -> list[dict[str, Any]]:
 
 
 def _log_matches(ws: Workspace, pairs: list[dict[str, Any]]) -> None:
+    from recon import recording
+
     with recording.step_recording(ws.log_path("matches"), "matches") as rec:
         recording.log_series(rec, "pair", "stats/inliers_per_pair", [p["inliers"] for p in pairs])
         recording.log_table(rec, "tables/pairs", "Verified image pairs", pairs)
@@ -316,9 +321,7 @@ def initialise_intrinsics(
             IntrinsicsContext(database_path=db, images_dir=ws.images_dir, cameras=cameras)
         )
         applied = _write_focal_priors(db, result)
-        with recording.step_recording(ws.log_path("intrinsics"), "intrinsics") as rec:
-            recording.log_table(rec, "tables/intrinsics", f"Focal priors ({config.intrinsics})",
-                                applied)
+        _log_intrinsics(ws, config.intrinsics, applied)
     return ws.record_step(
         "intrinsics",
         fp,
@@ -331,6 +334,13 @@ def initialise_intrinsics(
             "details": dict(result.details),
         },
     )
+
+
+def _log_intrinsics(ws: Workspace, name: str, applied: list[dict[str, Any]]) -> None:
+    from recon import recording
+
+    with recording.step_recording(ws.log_path("intrinsics"), "intrinsics") as rec:
+        recording.log_table(rec, "tables/intrinsics", f"Focal priors ({name})", applied)
 
 
 def _write_focal_priors(database_path: Path, result: IntrinsicsResult) -> list[dict[str, Any]]:
@@ -367,6 +377,8 @@ def _write_focal_priors(database_path: Path, result: IntrinsicsResult) -> list[d
 
 # Mapping -------------------------------------------------------------------------------------
 def map_sparse(ws: Workspace, config: SfMConfig, *, overwrite: bool = False) -> StepRecord:
+    from recon import recording
+
     upstream = ws.step("intrinsics")
     if upstream is None:
         raise UserError(f"{ws.root}: intrinsics not initialised; run `mocap sfm {ws.root}`")
@@ -470,6 +482,8 @@ def per_image_reprojection_error(model: pycolmap.Reconstruction) -> dict[str, fl
 
 
 def _log_model(rec: Any, ws: Workspace, model: pycolmap.Reconstruction) -> None:
+    from recon import recording
+
     ids = sorted(model.points3D)
     if ids:
         xyz = np.array([model.points3D[i].xyz for i in ids])
@@ -556,6 +570,9 @@ STEPS = (
 
 def run_sfm(ws: Workspace, config: SfMConfig, *, overwrite: bool = False) -> SfMSummary:
     """All SfM steps in order; each resumes from what the workspace already holds."""
+    # Importing rerun takes ~0.3 s of pure Python; do it while COLMAP extracts features (which
+    # releases the GIL) rather than before. Logging functions import the module when needed.
+    threading.Thread(target=importlib.import_module, args=("recon.recording",), daemon=True).start()
     steps: dict[str, StepRecord] = {}
     reused = []
     for name, step in STEPS:
