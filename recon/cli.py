@@ -15,6 +15,7 @@ _EPILOG = """examples:
   mocap init ws/temple --images photos/       make a workspace from a folder of photos
   mocap sfm ws/temple                         sparse model in ws/temple/sparse/0
   mocap sfm ws/temple --intrinsics fixed -O focal_px=1520
+  mocap compare ws/temple --gt photos/templeSR_par.txt   focal initialisers vs truth
   mocap view ws/temple                        open the recordings in the Rerun viewer
   mocap plugins                               list the registered plugins
 """
@@ -85,7 +86,20 @@ def _cmd_demo(args: argparse.Namespace) -> None:
     print("\n".join(report.lines()))
 
 
+def _cmd_compare(args: argparse.Namespace) -> None:
+    from recon.calibration.compare import CompareConfig, compare_intrinsics
+    from recon.sfm import SfMConfig
+    from recon.workspace import Workspace
+
+    ws = Workspace.open(args.workspace)
+    sfm = config_from_args(SfMConfig, args)
+    comparison = compare_intrinsics(ws, sfm, config_from_args(CompareConfig, args),
+                                    overwrite=args.overwrite)
+    print("\n".join(comparison.lines()))
+
+
 def build_parser() -> argparse.ArgumentParser:
+    from recon.calibration.compare import CompareConfig
     from recon.demo import DemoConfig
     from recon.sfm import SfMConfig
 
@@ -122,6 +136,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true", help="recompute every step")
     add_config_arguments(p, SfMConfig)
     p.set_defaults(func=_cmd_sfm)
+
+    p = sub.add_parser("compare", help="every focal initialiser on the same matches, vs truth",
+                       description="Run each intrinsic initialiser (Kruppa, Kruppa + BA, COLMAP "
+                       "default + BA, view-graph calibration, with and without BA, EXIF when "
+                       "present) on the same features and matches, each in WS/compare/<method>, "
+                       "and report focal length, error against --gt, registered images, "
+                       "reprojection error and time. Writes WS/compare/{comparison.json, "
+                       "report.md, pairs.png, errors.png} and WS/logs/compare.rrd.")
+    p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder")
+    p.add_argument("--overwrite", action="store_true", help="recompute every step")
+    add_config_arguments(p, CompareConfig)
+    add_config_arguments(p, SfMConfig, exclude=("intrinsics", "intrinsics_options",
+                                                 "refine_focal"))
+    p.set_defaults(func=_cmd_compare)
 
     p = sub.add_parser("view", help="open the workspace's recordings in the Rerun viewer")
     p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder")

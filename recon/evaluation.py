@@ -373,3 +373,72 @@ def focal_error(estimated_px: float, true_px: float) -> float:
     if not math.isfinite(estimated_px):
         raise ValueError(f"estimated focal length must be finite, got {estimated_px}")
     return (estimated_px - true_px) / true_px
+
+
+# ---------------------------------------------------------------------------------------------
+# Any supported ground truth, by what the path looks like
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    focal_px: float
+    """Mean of fx and fy over the cameras, in pixels."""
+    cameras: dict[str, CameraTruth] | None
+    """Per-image cameras when the source has poses (not for a bare K.txt)."""
+    source: str
+
+
+def read_k_txt(path: Path) -> np.ndarray:
+    """A 3x3 calibration matrix written as 3 rows of 3 numbers (Strecha's ``K.txt``)."""
+    try:
+        rows = [[float(v) for v in line.split()] for line in Path(path).read_text().splitlines()
+                if line.strip()]
+        K = np.array(rows, dtype=np.float64)
+    except ValueError:
+        raise ValueError(f"{path}: not a 3x3 matrix of numbers") from None
+    if K.shape != (3, 3):
+        raise ValueError(f"{path}: expected 3 rows of 3 numbers, got shape {K.shape}")
+    return K
+
+
+def load_ground_truth(path: Path) -> GroundTruth:
+    """Ground truth from a Middlebury ``*_par.txt``, a folder of Strecha ``*.camera`` files, a
+    Strecha ``K.txt``, a COLMAP model folder, or our ``mocap-cameras-v1`` JSON.
+
+    ValueError with a one-line message naming the path when it is none of these.
+    """
+    path = Path(path)
+    cameras: dict[str, CameraTruth]
+    if path.is_dir() and any(path.glob("*.camera")):
+        cameras, kind = read_strecha_cameras(path), "Strecha cameras"
+    elif path.is_dir() and any((path / f"cameras.{ext}").exists() for ext in ("bin", "txt")):
+        import pycolmap
+
+        model = pycolmap.Reconstruction(path)
+        cameras = {
+            im.name: CameraTruth(
+                width=model.cameras[im.camera_id].width,
+                height=model.cameras[im.camera_id].height,
+                K=model.cameras[im.camera_id].calibration_matrix(),
+                cam_from_world=im.cam_from_world().matrix(),
+            )
+            for im in model.images.values()
+            if im.has_pose
+        }
+        kind = "COLMAP model"
+    elif path.is_file() and path.suffix == ".json":
+        cameras, kind = read_truth(path), "mocap-cameras-v1"
+    elif path.is_file() and path.name.endswith("_par.txt"):
+        cameras, kind = read_middlebury_par(path), "Middlebury par"
+    elif path.is_file() and path.suffix == ".txt":
+        K = read_k_txt(path)
+        return GroundTruth(float(0.5 * (K[0, 0] + K[1, 1])), None, f"K matrix {path}")
+    else:
+        raise ValueError(
+            f"{path}: not a ground truth this tool reads (Middlebury *_par.txt, a folder of "
+            "Strecha *.camera files, K.txt, a COLMAP model folder, or mocap-cameras-v1 JSON)"
+        )
+    if not cameras:
+        raise ValueError(f"{path}: no cameras in this {kind}")
+    focal = float(np.mean([c.focal_px for c in cameras.values()]))
+    return GroundTruth(focal, cameras, f"{kind} {path}")

@@ -207,6 +207,32 @@ class Workspace:
         ws._write_run({"format": RUN_FORMAT, "source_images": str(source.resolve()), "steps": {}})
         return ws, notes
 
+    def branch(self, root: Path | str, steps: tuple[str, ...]) -> Workspace:
+        """A workspace that shares this one's images and starts from its finished ``steps``.
+
+        The database is copied (a branch may rewrite cameras), the images are a symlink, and the
+        run records of ``steps`` are copied so that fingerprints chain as if the branch had run
+        them. Used to try alternatives (for example intrinsic initialisers) on the same matches.
+        """
+        branch = Workspace(root)
+        branch.root.mkdir(parents=True, exist_ok=True)
+        if not branch.images_dir.exists():
+            os.symlink(os.path.relpath(self.images_dir.resolve(), branch.root.resolve()),
+                       branch.images_dir)
+        records = {name: self.read_run().get("steps", {}).get(name) for name in steps}
+        missing = [name for name, rec in records.items() if rec is None]
+        if missing:
+            raise UserError(f"{self.root}: step(s) {', '.join(missing)} not run yet")
+        mine = branch.read_run()
+        if any(mine.get("steps", {}).get(n) != records[n] for n in steps) or not (
+            branch.database_path.exists()
+        ):
+            with atomic_output(branch.database_path, seed_from=self.database_path):
+                pass
+            mine = {"format": RUN_FORMAT, "branch_of": str(self.root), "steps": records}
+            branch._write_run(mine)
+        return branch
+
     def image_names(self) -> list[str]:
         """COLMAP image names (paths relative to images/, with forward slashes), sorted."""
         if not self.images_dir.is_dir():
