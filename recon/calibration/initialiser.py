@@ -1,0 +1,195 @@
+"""The ``kruppa`` intrinsic initialiser: focal length from the database's fundamental matrices.
+
+After matching, COLMAP's database holds a verified two-view geometry per image pair, with F in
+the ``x2ᵀ F x1 = 0`` convention (image 1 = the pair's first image id). Each F gives a
+closed-form focal (:func:`recon.calibration.kruppa.focal_from_fundamental`), the pairs are fused
+robustly (:mod:`recon.calibration.fusion`), and the result becomes the focal prior of every
+camera of that image size. When no focal can be had, the camera falls back to COLMAP's default
+start with a warning, so mapping still runs.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pycolmap
+
+from plugins.protocols import FocalPrior, IntrinsicsContext, IntrinsicsResult
+from recon.calibration.fusion import (
+    FocalEstimate,
+    FusionMethod,
+    estimate_focal_joint,
+    fuse_pair_focals,
+)
+from recon.calibration.kruppa import KruppaConfig, PairFocal, focal_from_fundamental
+
+# Geometries whose F is an estimated fundamental matrix (DEGENERATE, PLANAR, PANORAMIC ... are
+# not: their F is absent or meaningless for self-calibration).
+_WITH_F = {"UNCALIBRATED", "CALIBRATED"}
+
+
+@dataclass(frozen=True)
+class PairGeometryRow:
+    image_i: str
+    image_j: str
+    image_id_i: int
+    image_id_j: int
+    camera_i: int
+    camera_j: int
+    config: str
+    inliers: int
+    F: np.ndarray | None
+    """(3, 3) with x_jᵀ F x_i = 0 (pixels, COLMAP's +0.5 pixel-centre convention)."""
+
+
+def read_pair_geometries(database_path: Path) -> list[PairGeometryRow]:
+    """Every verified pair of a COLMAP database, with its F where it has one."""
+    with pycolmap.Database.open(database_path) as db:
+        images = {im.image_id: im for im in db.read_all_images()}
+        pair_ids, geometries = db.read_two_view_geometries()
+    rows = []
+    for pair_id, geometry in zip(pair_ids, geometries, strict=True):
+        i, j = pycolmap.pair_id_to_image_pair(pair_id)
+        config = pycolmap.TwoViewGeometryConfiguration(int(geometry.config)).name
+        F = np.asarray(geometry.F, dtype=np.float64) if config in _WITH_F else None
+        if F is not None and (not np.all(np.isfinite(F)) or not np.any(F)):
+            F = None
+        rows.append(
+            PairGeometryRow(
+                image_i=images[i].name,
+                image_j=images[j].name,
+                image_id_i=i,
+                image_id_j=j,
+                camera_i=images[i].camera_id,
+                camera_j=images[j].camera_id,
+                config=config,
+                inliers=len(geometry.inlier_matches),
+                F=F,
+            )
+        )
+    return sorted(rows, key=lambda r: (r.image_i, r.image_j))
+
+
+class KruppaInitialiser:
+    description = (
+        "closed-form focal from each pair's F (degenerated Kruppa equations, thesis ch. 4), "
+        "fused robustly over pairs"
+    )
+
+    @dataclass(frozen=True, kw_only=True)
+    class Options:
+        refine: bool = field(
+            default=True, metadata={"help": "let bundle adjustment refine the Kruppa focal"}
+        )
+        fusion: FusionMethod = field(
+            default=FusionMethod.PER_PAIR,
+            metadata={"help": "per-pair-robust-mean (thesis) or joint-kruppa-residual"},
+        )
+        min_inliers: int = field(
+            default=30, metadata={"help": "pairs with fewer verified inliers are not used"}
+        )
+
+    def __init__(self, options: Options):
+        self.options = options
+
+    def initialise(self, context: IntrinsicsContext) -> IntrinsicsResult:
+        rows = read_pair_geometries(context.database_path)
+        # One constant focal is assumed within a group of cameras of the same image size (all
+        # the photos of one camera, whatever COLMAP's camera mode split them into).
+        groups: dict[tuple[int, int], list[int]] = defaultdict(list)
+        for camera in context.cameras:
+            groups[(camera.width, camera.height)].append(camera.camera_id)
+        principal = _principal_points(context.database_path)
+        priors: list[FocalPrior] = []
+        notes: list[str] = []
+        table: list[dict[str, Any]] = []
+        fused: dict[str, Any] = {}
+        for size, camera_ids in sorted(groups.items()):
+            estimate, pair_rows = self._estimate_group(rows, set(camera_ids), size, principal)
+            table += pair_rows
+            fused[f"{size[0]}x{size[1]}"] = _estimate_dict(estimate)
+            if estimate.focal_px is None:
+                notes.append(
+                    f"kruppa: no focal for {size[0]}x{size[1]} cameras ({estimate.status}); "
+                    "falling back to COLMAP's default start 1.2·max(w, h)"
+                )
+            elif estimate.status != "ok":
+                notes.append(
+                    f"kruppa: {size[0]}x{size[1]} focal {estimate.focal_px:.1f} px is "
+                    f"{estimate.status} (±{estimate.sigma_px or 0:.1f} px)"
+                )
+            for camera_id in camera_ids:
+                priors.append(
+                    FocalPrior(
+                        camera_id=camera_id,
+                        focal_px=estimate.focal_px,
+                        source=(
+                            f"kruppa {estimate.num_pairs_used}/{estimate.num_pairs} pairs, "
+                            f"±{estimate.sigma_px or 0:.1f} px"
+                            if estimate.focal_px is not None
+                            else "1.2·max(w, h) (kruppa failed)"
+                        ),
+                    )
+                )
+        single = next(iter(fused.values())) if len(fused) == 1 else {}
+        return IntrinsicsResult(
+            priors=tuple(sorted(priors, key=lambda p: p.camera_id)),
+            refine_focal=self.options.refine,
+            notes=tuple(notes),
+            details={"pairs": table, "fused": single, "fused_by_size": fused},
+        )
+
+    def _estimate_group(
+        self,
+        rows: list[PairGeometryRow],
+        camera_ids: set[int],
+        size: tuple[int, int],
+        principal: dict[int, tuple[float, float]],
+    ) -> tuple[FocalEstimate, list[dict[str, Any]]]:
+        pairs: list[PairFocal] = []
+        inliers: list[int] = []
+        ids: list[tuple[int, int]] = []
+        table = []
+        for row in rows:
+            if row.camera_i not in camera_ids or row.camera_j not in camera_ids:
+                continue
+            entry = {"image_i": row.image_i, "image_j": row.image_j, "inliers": row.inliers,
+                     "focal_px": None, "status": "", "conditioning": 0.0, "method": ""}
+            if row.F is None:
+                entry["status"] = f"no-F ({row.config.lower()})"
+            elif row.inliers < self.options.min_inliers:
+                entry["status"] = "too-few-inliers"
+            else:
+                pair = focal_from_fundamental(
+                    row.F, principal_point=principal[row.camera_i], image_size=size,
+                    config=KruppaConfig(),
+                )
+                entry.update(focal_px=pair.focal_px, status=str(pair.status),
+                             conditioning=pair.conditioning, method=pair.method)
+                pairs.append(pair)
+                inliers.append(row.inliers)
+                ids.append((row.image_id_i, row.image_id_j))
+            table.append(entry)
+        fuse = (
+            estimate_focal_joint
+            if self.options.fusion is FusionMethod.JOINT
+            else fuse_pair_focals
+        )
+        return fuse(pairs, num_inliers=inliers, image_ids=ids), table
+
+
+def _principal_points(database_path: Path) -> dict[int, tuple[float, float]]:
+    with pycolmap.Database.open(database_path) as db:
+        return {
+            c.camera_id: (float(c.principal_point_x), float(c.principal_point_y))
+            for c in db.read_all_cameras()
+        }
+
+
+def _estimate_dict(estimate: FocalEstimate) -> dict[str, Any]:
+    data = asdict(estimate)
+    return {k: (str(v) if hasattr(v, "value") else v) for k, v in data.items()}
