@@ -10,11 +10,13 @@ start with a warning, so mapping still runs.
 
 from __future__ import annotations
 
+import enum
 from collections import defaultdict
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 import pycolmap
 
@@ -26,6 +28,12 @@ from recon.calibration.fusion import (
     fuse_pair_focals,
 )
 from recon.calibration.kruppa import KruppaConfig, PairFocal, focal_from_fundamental
+
+
+class FundamentalSource(enum.StrEnum):
+    REFIT = "refit"
+    COLMAP = "colmap"
+
 
 # Geometries whose F is an estimated fundamental matrix (DEGENERATE, PLANAR, PANORAMIC ... are
 # not: their F is absent or meaningless for self-calibration).
@@ -44,13 +52,24 @@ class PairGeometryRow:
     inliers: int
     F: np.ndarray | None
     """(3, 3) with x_jᵀ F x_i = 0 (pixels, COLMAP's +0.5 pixel-centre convention)."""
+    points_i: np.ndarray | None = None
+    """(inliers, 2) keypoint positions in image i of the verified inlier matches (px)."""
+    points_j: np.ndarray | None = None
 
 
-def read_pair_geometries(database_path: Path) -> list[PairGeometryRow]:
-    """Every verified pair of a COLMAP database, with its F where it has one."""
+def read_pair_geometries(
+    database_path: Path, *, with_points: bool = False
+) -> list[PairGeometryRow]:
+    """Every verified pair of a COLMAP database, with its F where it has one.
+
+    ``with_points`` also loads the inlier correspondences, for refitting F.
+    """
     with pycolmap.Database.open(database_path) as db:
         images = {im.image_id: im for im in db.read_all_images()}
         pair_ids, geometries = db.read_two_view_geometries()
+        keypoints = (
+            {i: db.read_keypoints(i)[:, :2] for i in images} if with_points else {}
+        )
     rows = []
     for pair_id, geometry in zip(pair_ids, geometries, strict=True):
         i, j = pycolmap.pair_id_to_image_pair(pair_id)
@@ -58,6 +77,11 @@ def read_pair_geometries(database_path: Path) -> list[PairGeometryRow]:
         F = np.asarray(geometry.F, dtype=np.float64) if config in _WITH_F else None
         if F is not None and (not np.all(np.isfinite(F)) or not np.any(F)):
             F = None
+        matches = np.asarray(geometry.inlier_matches, dtype=np.int64).reshape(-1, 2)
+        points = (
+            (keypoints[i][matches[:, 0]], keypoints[j][matches[:, 1]]) if with_points
+            else (None, None)
+        )
         rows.append(
             PairGeometryRow(
                 image_i=images[i].name,
@@ -67,8 +91,10 @@ def read_pair_geometries(database_path: Path) -> list[PairGeometryRow]:
                 camera_i=images[i].camera_id,
                 camera_j=images[j].camera_id,
                 config=config,
-                inliers=len(geometry.inlier_matches),
+                inliers=len(matches),
                 F=F,
+                points_i=points[0],
+                points_j=points[1],
             )
         )
     return sorted(rows, key=lambda r: (r.image_i, r.image_j))
@@ -92,12 +118,22 @@ class KruppaInitialiser:
         min_inliers: int = field(
             default=30, metadata={"help": "pairs with fewer verified inliers are not used"}
         )
+        fundamental: FundamentalSource = field(
+            default=FundamentalSource.REFIT,
+            metadata={
+                "help": "refit: F re-estimated from COLMAP's verified inliers (LMedS, then the "
+                "normalised 8-point on its inliers); colmap: the F stored in the database, "
+                "which COLMAP fits with one shared focal when the photos share a camera, so "
+                "Kruppa would only read that focal back"
+            },
+        )
 
     def __init__(self, options: Options):
         self.options = options
 
     def initialise(self, context: IntrinsicsContext) -> IntrinsicsResult:
-        rows = read_pair_geometries(context.database_path)
+        refit = self.options.fundamental is FundamentalSource.REFIT
+        rows = read_pair_geometries(context.database_path, with_points=refit)
         # One constant focal is assumed within a group of cameras of the same image size (all
         # the photos of one camera, whatever COLMAP's camera mode split them into).
         groups: dict[tuple[int, int], list[int]] = defaultdict(list)
@@ -159,13 +195,16 @@ class KruppaInitialiser:
                 continue
             entry = {"image_i": row.image_i, "image_j": row.image_j, "inliers": row.inliers,
                      "focal_px": None, "status": "", "conditioning": 0.0, "method": ""}
-            if row.F is None:
+            F = row.F
+            if F is not None and self.options.fundamental is FundamentalSource.REFIT:
+                F = refit_fundamental(row.points_i, row.points_j)
+            if F is None:
                 entry["status"] = f"no-F ({row.config.lower()})"
             elif row.inliers < self.options.min_inliers:
                 entry["status"] = "too-few-inliers"
             else:
                 pair = focal_from_fundamental(
-                    row.F, principal_point=principal[row.camera_i], image_size=size,
+                    F, principal_point=principal[row.camera_i], image_size=size,
                     config=KruppaConfig(),
                 )
                 entry.update(focal_px=pair.focal_px, status=str(pair.status),
@@ -180,6 +219,30 @@ class KruppaInitialiser:
             else fuse_pair_focals
         )
         return fuse(pairs, num_inliers=inliers, image_ids=ids), table
+
+
+def refit_fundamental(
+    points_i: np.ndarray | None, points_j: np.ndarray | None
+) -> np.ndarray | None:
+    """F with ``x_jᵀ F x_i = 0`` from verified correspondences ((N, 2) px each), or None.
+
+    The thesis' robust step (LMedS) on COLMAP's RANSAC inliers, then the normalised 8-point
+    algorithm on the LMedS inliers: OpenCV's robust estimators return the model of their best
+    minimal sample, noticeably worse than a least-squares refit on all inliers.
+    """
+    if points_i is None or points_j is None or len(points_i) < 15:
+        return None
+    p1 = np.ascontiguousarray(points_i, dtype=np.float64)
+    p2 = np.ascontiguousarray(points_j, dtype=np.float64)
+    F, mask = cv2.findFundamentalMat(p1, p2, cv2.FM_LMEDS)
+    if F is None or F.shape != (3, 3) or mask is None:
+        return None
+    keep = mask.ravel().astype(bool)
+    if keep.sum() >= 8:
+        refit, _ = cv2.findFundamentalMat(p1[keep], p2[keep], cv2.FM_8POINT)
+        if refit is not None and refit.shape == (3, 3):
+            F = refit
+    return F / np.linalg.norm(F)
 
 
 def _principal_points(database_path: Path) -> dict[int, tuple[float, float]]:
