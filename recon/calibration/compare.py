@@ -105,11 +105,18 @@ class Comparison:
             out.append(
                 f"{name:<20}{focal:>10}{err:>9}{m['registered']:>7} of {m['images']:<3}"
                 f"{reproj:>10}{m['seconds']:>9.1f}"
+                + ("  (fell back to colmap-default)" if m.get("fallback") else "")
             )
         ok = sum(p["status"] == "ok" for p in self.pairs)
+        fused = (
+            f"; fused {self.fused['focal_px']:.1f} px ±{self.fused['sigma_px']:.1f}, "
+            f"{self.fused['status']}"
+            if self.fused.get("focal_px") is not None
+            else f"; fused: {self.fused.get('status', 'not run')}"
+        )
         out += [
             "",
-            f"kruppa pairs: {ok} ok of {len(self.pairs)}",
+            f"kruppa pairs: {ok} ok of {len(self.pairs)}{fused}",
             *(f"{k:<12}{v}" for k, v in self.outputs.items()),
         ]
         return out
@@ -150,7 +157,9 @@ def _run_method(ws: Workspace, method: Method, sfm: SfMConfig, overwrite: bool) 
             "seconds": intrinsics.seconds, "error": str(exc),
         }
     cams = mapping.summary["cameras"]
+    details = intrinsics.summary.get("details", {})
     return result | {
+        "fallback": bool(details.get("fallback", False)),
         "focal_px": sum(c["focal_px"] for c in cams) / len(cams),
         "registered": mapping.summary["registered"],
         "mean_reproj_px": mapping.summary["mean_reprojection_error_px"],

@@ -24,6 +24,7 @@ from plugins.protocols import FocalPrior, IntrinsicsContext, IntrinsicsResult
 from recon.calibration.fusion import (
     FocalEstimate,
     FusionMethod,
+    FusionStatus,
     estimate_focal_joint,
     fuse_pair_focals,
 )
@@ -119,12 +120,17 @@ class KruppaInitialiser:
             default=30, metadata={"help": "pairs with fewer verified inliers are not used"}
         )
         fundamental: FundamentalSource = field(
-            default=FundamentalSource.REFIT,
+            default=FundamentalSource.COLMAP,
             metadata={
-                "help": "refit: F re-estimated from COLMAP's verified inliers (LMedS, then the "
-                "normalised 8-point on its inliers); colmap: the F stored in the database, "
-                "which COLMAP fits with one shared focal when the photos share a camera, so "
-                "Kruppa would only read that focal back"
+                "help": "colmap: the F of each verified two-view geometry in the database; "
+                "refit: F re-estimated from its inliers (LMedS, then the normalised 8-point)"
+            },
+        )
+        accept_low_confidence: bool = field(
+            default=False,
+            metadata={
+                "help": "use a fused focal flagged low-confidence (near-singular pairs only, "
+                "too few pairs, or pairs that disagree) instead of falling back"
             },
         )
 
@@ -144,39 +150,52 @@ class KruppaInitialiser:
         notes: list[str] = []
         table: list[dict[str, Any]] = []
         fused: dict[str, Any] = {}
+        fallback = False
         for size, camera_ids in sorted(groups.items()):
             estimate, pair_rows = self._estimate_group(rows, set(camera_ids), size, principal)
             table += pair_rows
             fused[f"{size[0]}x{size[1]}"] = _estimate_dict(estimate)
-            if estimate.focal_px is None:
-                notes.append(
-                    f"kruppa: no focal for {size[0]}x{size[1]} cameras ({estimate.status}); "
-                    "falling back to COLMAP's default start 1.2·max(w, h)"
+            usable = estimate.focal_px is not None and (
+                estimate.status == FusionStatus.OK or self.options.accept_low_confidence
+            )
+            label = f"{size[0]}x{size[1]} cameras"
+            if not usable:
+                fallback = True
+                found = (
+                    f"{estimate.focal_px:.1f} px, {estimate.status}"
+                    if estimate.focal_px is not None else str(estimate.status)
                 )
-            elif estimate.status != "ok":
                 notes.append(
-                    f"kruppa: {size[0]}x{size[1]} focal {estimate.focal_px:.1f} px is "
-                    f"{estimate.status} (±{estimate.sigma_px or 0:.1f} px)"
+                    f"kruppa: no trustworthy focal for {label} ({found}; "
+                    f"{_counts(estimate)}); falling back to colmap-default"
+                )
+            elif estimate.status != FusionStatus.OK:
+                notes.append(
+                    f"kruppa: {label} focal {estimate.focal_px:.1f} px is {estimate.status} "
+                    f"(±{estimate.sigma_px or 0:.1f} px), used as asked"
                 )
             for camera_id in camera_ids:
                 priors.append(
                     FocalPrior(
                         camera_id=camera_id,
-                        focal_px=estimate.focal_px,
+                        focal_px=estimate.focal_px if usable else None,
                         source=(
                             f"kruppa {estimate.num_pairs_used}/{estimate.num_pairs} pairs, "
                             f"±{estimate.sigma_px or 0:.1f} px"
-                            if estimate.focal_px is not None
-                            else "1.2·max(w, h) (kruppa failed)"
+                            if usable
+                            else "1.2·max(w, h) (kruppa fallback)"
                         ),
                     )
                 )
         single = next(iter(fused.values())) if len(fused) == 1 else {}
         return IntrinsicsResult(
             priors=tuple(sorted(priors, key=lambda p: p.camera_id)),
-            refine_focal=self.options.refine,
+            # A fallback is colmap-default, which refines: a default guess must not be frozen.
+            refine_focal=self.options.refine or fallback,
             notes=tuple(notes),
-            details={"pairs": table, "fused": single, "fused_by_size": fused},
+            details={
+                "pairs": table, "fused": single, "fused_by_size": fused, "fallback": fallback,
+            },
         )
 
     def _estimate_group(
@@ -251,6 +270,11 @@ def _principal_points(database_path: Path) -> dict[int, tuple[float, float]]:
             c.camera_id: (float(c.principal_point_x), float(c.principal_point_y))
             for c in db.read_all_cameras()
         }
+
+
+def _counts(estimate: FocalEstimate) -> str:
+    counts = ", ".join(f"{n} {s}" for s, n in estimate.status_counts) or "no pairs"
+    return f"pairs: {counts}"
 
 
 def _estimate_dict(estimate: FocalEstimate) -> dict[str, Any]:

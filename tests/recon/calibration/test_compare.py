@@ -1,0 +1,114 @@
+"""`mocap compare` and the kruppa / view-graph initialisers against known focal lengths."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from recon.calibration.compare import CompareConfig, compare_intrinsics
+from recon.demo import DemoConfig, make_scene
+from recon.sfm import SfMConfig, run_sfm
+from recon.workspace import Workspace
+from tests.helpers import recording_entities, run_cli, shared_dataset
+
+TRUE_FOCAL = 600.0  # the synthetic scene's
+
+
+@pytest.fixture(scope="module")
+def demo_ws(tmp_path_factory):
+    out = tmp_path_factory.mktemp("compare") / "demo"
+    images, truth, _ = make_scene(DemoConfig(out=out, num_views=10))
+    ws, _ = Workspace.create(out, images)
+    return ws, truth
+
+
+def test_compare_on_the_synthetic_scene(demo_ws):
+    ws, truth = demo_ws
+    json_copy = ws.root / "elsewhere" / "c.json"
+    result = compare_intrinsics(
+        ws, SfMConfig(), CompareConfig(gt=truth, json=json_copy)
+    )
+    data = json.loads((ws.root / "compare" / "comparison.json").read_text())
+    assert data == json.loads(json_copy.read_text())
+    assert data["ground_truth_focal_px"] == pytest.approx(TRUE_FOCAL)
+    assert set(data["methods"]) == {
+        "kruppa", "kruppa+ba", "colmap-default+ba", "view-graph", "view-graph+ba"
+    }
+    for name, method in data["methods"].items():
+        assert method["registered"] == method["images"] == 10, name
+        assert abs(method["rel_error"]) < 0.01, name  # all within 1% on a generic scene
+        assert method["seconds"] > 0 and method["mean_reproj_px"] < 1.0
+    # Kruppa alone: the focal is the closed-form estimate, held fixed in mapping.
+    kruppa = data["methods"]["kruppa"]
+    assert kruppa["focal_px"] == pytest.approx(kruppa["initial_focal_px"])
+    assert not kruppa["fallback"]
+    # Per-pair table (thesis Table 4.1): every pair has a status; ok pairs have a focal.
+    assert data["pairs"] and all(p["status"] for p in data["pairs"])
+    ok = [p for p in data["pairs"] if p["status"] == "ok"]
+    assert len(ok) >= 10 and all(p["focal_px"] > 0 for p in ok)
+    assert data["kruppa_fused"]["status"] == "ok"
+    for key in ("pairs_png", "errors_png", "report"):
+        assert result.outputs[key].stat().st_size > 1000
+    assert "Table 4.1" in result.outputs["report"].read_text()
+    entities = recording_entities(ws.root / "logs" / "compare.rrd")
+    assert "/kruppa/pair_focal_px@Scalars:scalars" in entities
+    assert "/tables/methods@TextDocument:text" in entities
+
+
+def test_kruppa_through_sfm_sets_the_prior(demo_ws):
+    ws, _ = demo_ws
+    summary = run_sfm(ws, SfMConfig(intrinsics="kruppa", intrinsics_options=("refine=false",)))
+    camera = summary.steps["intrinsics"].summary["cameras"][0]
+    assert camera["prior"] and camera["focal_px"] == pytest.approx(TRUE_FOCAL, rel=0.01)
+    assert camera["source"].startswith("kruppa")
+    assert summary.mapping["cameras"][0]["focal_px"] == pytest.approx(camera["focal_px"])
+
+
+def test_compare_rejects_bad_ground_truth_and_methods(demo_ws, tmp_path):
+    ws, _ = demo_ws
+    bogus = tmp_path / "gt.csv"
+    bogus.write_text("1,2,3")
+    result = run_cli("compare", ws.root, "--gt", bogus)
+    assert result.returncode == 2 and "not a ground truth" in result.stderr
+    result = run_cli("compare", ws.root, "--methods", "kruppa,magic")
+    assert result.returncode == 2 and "unknown method(s) magic" in result.stderr
+
+
+@pytest.mark.shared_data
+def test_temple_ring_is_flagged_and_falls_back(tmp_path):
+    """The Middlebury ring is Kruppa's singular case: every pair must be flagged, and mapping
+    falls back to COLMAP's default rather than using a meaningless focal."""
+    temple = shared_dataset("temple_sparse_ring")
+    ws = tmp_path / "temple"
+    assert run_cli("init", ws, "--images", temple).returncode == 0
+    result = run_cli(
+        "compare", ws, "--gt", temple / "templeSR_par.txt", "--methods", "kruppa,view-graph"
+    )
+    assert result.returncode == 0, result.stderr
+    data = json.loads((ws / "compare" / "comparison.json").read_text())
+    assert data["ground_truth_focal_px"] == pytest.approx(1523.15)
+    assert not [p for p in data["pairs"] if p["status"] == "ok"]
+    assert data["kruppa_fused"]["status"] != "ok"
+    assert data["methods"]["kruppa"]["fallback"]
+    assert "fell back" in result.stdout
+    # The fallback is COLMAP's default with BA: within 2% of the truth.
+    assert abs(data["methods"]["kruppa"]["rel_error"]) < 0.02
+    # COLMAP's view-graph calibration is far off on this ring (measured 54%).
+    assert abs(data["methods"]["view-graph"]["rel_error"]) > 0.2
+
+
+@pytest.mark.slow
+@pytest.mark.shared_data
+def test_fountain_kruppa_within_half_a_percent(tmp_path):
+    fountain = shared_dataset("fountain_p11")
+    ws = tmp_path / "fountain"
+    assert run_cli("init", ws, "--images", fountain / "images").returncode == 0
+    result = run_cli(
+        "compare", ws, "--gt", fountain / "gt_dense_cameras", "--methods", "kruppa,kruppa+ba"
+    )
+    assert result.returncode == 0, result.stderr
+    methods = json.loads((ws / "compare" / "comparison.json").read_text())["methods"]
+    assert abs(methods["kruppa"]["rel_error"]) < 0.005
+    assert abs(methods["kruppa+ba"]["rel_error"]) < 0.001
+    assert methods["kruppa+ba"]["registered"] == 11
