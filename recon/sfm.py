@@ -50,6 +50,11 @@ class Matcher(enum.StrEnum):
     SEQUENTIAL = "sequential"
 
 
+class FrontEnd(enum.StrEnum):
+    SIFT = "colmap-sift"
+    HARRIS_NCC = "harris-ncc"
+
+
 # Exhaustive matching is quadratic; beyond this many images `auto` switches to sequential.
 EXHAUSTIVE_MAX_IMAGES = 150
 
@@ -78,6 +83,14 @@ class SfMConfig:
         metadata={
             "help": "which images share intrinsics; auto: one camera when all photos have the "
             "same size and EXIF camera and focal length, else one per image"
+        },
+    )
+    front_end: FrontEnd = field(
+        default=FrontEnd.SIFT,
+        metadata={
+            "help": "colmap-sift: COLMAP's SIFT features and matching; harris-ncc: the "
+            "thesis' Harris corners, NCC matching and robust F (recon.frontend), for "
+            "small baselines between consecutive photos"
         },
     )
     max_image_size: int = field(
@@ -141,6 +154,7 @@ def extract_features(ws: Workspace, config: SfMConfig, *, overwrite: bool = Fals
     mode = resolve_camera_mode(ws, config.camera_mode)
     settings = {
         **_config_dict(config, "camera_model", "max_image_size", "max_num_features"),
+        "front_end": str(config.front_end),
         "camera_mode": str(mode),
         "images": names,
     }
@@ -159,16 +173,19 @@ def extract_features(ws: Workspace, config: SfMConfig, *, overwrite: bool = Fals
         CameraMode.PER_FOLDER: pycolmap.CameraMode.PER_FOLDER,
     }[mode]
     with Timer() as timer, atomic_output(ws.database_path) as db:
-        with polled(len(names), "features", "img", count_rows(db, "keypoints")):
-            pycolmap.extract_features(
-                db,
-                ws.images_dir,
-                image_names=names,
-                camera_mode=colmap_mode,
-                reader_options=reader,
-                extraction_options=extraction,
-                device=_device(),
-            )
+        if config.front_end is FrontEnd.HARRIS_NCC:
+            _extract_harris(ws, db, names, colmap_mode, reader, config)
+        else:
+            with polled(len(names), "features", "img", count_rows(db, "keypoints")):
+                pycolmap.extract_features(
+                    db,
+                    ws.images_dir,
+                    image_names=names,
+                    camera_mode=colmap_mode,
+                    reader_options=reader,
+                    extraction_options=extraction,
+                    device=_device(),
+                )
         with pycolmap.Database.open(db) as database:
             num_images = database.num_images()
             num_keypoints = database.num_keypoints()
@@ -183,6 +200,83 @@ def extract_features(ws: Workspace, config: SfMConfig, *, overwrite: bool = Fals
         seconds=timer.seconds,
         summary={"images": num_images, "cameras": num_cameras, "keypoints": num_keypoints},
     )
+
+
+def _harris_config(config: SfMConfig) -> Any:
+    from recon.frontend import HarrisNccConfig
+
+    return HarrisNccConfig(max_image_size=config.max_image_size,
+                           max_corners=config.max_num_features)
+
+
+def _extract_harris(
+    ws: Workspace,
+    db: Path,
+    names: list[str],
+    mode: pycolmap.CameraMode,
+    reader: pycolmap.ImageReaderOptions,
+    config: SfMConfig,
+) -> None:
+    """Cameras and images as COLMAP would create them, with Harris corners as keypoints."""
+    import cv2
+
+    from recon.frontend import detect_corners
+
+    pycolmap.Database.open(db).close()  # import_images wants an existing database
+    pycolmap.import_images(db, ws.images_dir, camera_mode=mode, image_names=names,
+                           options=reader)
+    harris = _harris_config(config)
+    progress = bar(len(names), "corners", "img")
+    with pycolmap.Database.open(db) as database:
+        for image in database.read_all_images():
+            gray = cv2.imread(str(ws.images_dir / image.name), cv2.IMREAD_GRAYSCALE)
+            if gray is None:
+                raise UserError(f"cannot read image {ws.images_dir / image.name}")
+            # Corners are (N, 2) px with pixel centres at +0.5, COLMAP's keypoint convention.
+            database.write_keypoints(image.image_id, detect_corners(gray, harris))
+            progress.update(1)
+    progress.close()
+
+
+def _match_harris(ws: Workspace, db: Path, pairs: list[tuple[str, str]] | None,
+                  config: SfMConfig) -> None:
+    """NCC matches and robust F of each pair, written as COLMAP matches and geometries."""
+    from recon.frontend import run_front_end
+
+    names = ws.image_names()
+    total = len(names) + (len(pairs) if pairs is not None else len(names) * (len(names) - 1) // 2)
+    progress = bar(total, "matching", "step")
+
+    def advance(done: int, _total: int) -> None:
+        progress.n = done
+        progress.refresh()
+
+    result = run_front_end({n: ws.images_dir / n for n in names}, _harris_config(config),
+                           pairs=pairs, progress=advance)
+    progress.close()
+    with pycolmap.Database.open(db) as database:
+        ids = {im.name: im.image_id for im in database.read_all_images()}
+        for name in names:
+            # The front end detects corners exactly as the features step did.
+            if len(database.read_keypoints(ids[name])) != len(result.corners[name]):
+                raise UserError(f"corners of {name} changed since the features step; "
+                                "rerun with --overwrite")
+        for (a, b), geometry in result.pairs.items():
+            matches = np.asarray(geometry.matches, dtype=np.uint32).reshape(-1, 2)
+            database.write_matches(ids[a], ids[b], matches)
+            tvg = pycolmap.TwoViewGeometry()
+            if geometry.status == "ok" and geometry.F is not None:
+                tvg.config = pycolmap.TwoViewGeometryConfiguration.UNCALIBRATED
+                tvg.F = geometry.F
+                tvg.inlier_matches = np.asarray(geometry.inlier_matches, dtype=np.uint32)
+            else:
+                tvg.config = pycolmap.TwoViewGeometryConfiguration.DEGENERATE
+            database.write_two_view_geometry(ids[a], ids[b], tvg)
+
+
+def _sequential_pairs(names: list[str], overlap: int) -> list[tuple[str, str]]:
+    return [(names[i], names[j]) for i in range(len(names))
+            for j in range(i + 1, min(len(names), i + 1 + overlap))]
 
 
 def _log_features(ws: Workspace, database_path: Path) -> None:
@@ -231,7 +325,12 @@ def match_features(ws: Workspace, config: SfMConfig, *, overwrite: bool = False)
             # Stale matches from other settings would be kept by COLMAP, which skips known pairs.
             database.clear_matches()
             database.clear_two_view_geometries()
-        if matcher is Matcher.EXHAUSTIVE:
+        if upstream.config.get("front_end") == FrontEnd.HARRIS_NCC:
+            sequential = matcher is Matcher.SEQUENTIAL
+            names = ws.image_names()
+            pairs = _sequential_pairs(names, config.sequential_overlap) if sequential else None
+            _match_harris(ws, db, pairs, config)
+        elif matcher is Matcher.EXHAUSTIVE:
             total = num_images * (num_images - 1) // 2
             with polled(total, "matching", "pair", count_rows(db, "two_view_geometries")):
                 pycolmap.match_exhaustive(db, matching_options=matching, device=_device())

@@ -40,3 +40,20 @@ def test_sequential_matching_on_the_demo_scene(tmp_path):
     assert matches.summary["pairs"] < 8 * 7 // 2
     assert report.sfm.mapping["registered"] == 8
     assert abs(report.focal_rel_error) < 0.02
+
+
+def test_thesis_front_end_with_kruppa_on_the_demo_scene(tmp_path):
+    """Harris corners + NCC + robust F into COLMAP's database, Kruppa focal, then mapping."""
+    from recon.demo import DemoConfig, run_demo
+    from recon.sfm import FrontEnd, Matcher, SfMConfig
+
+    config = SfMConfig(front_end=FrontEnd.HARRIS_NCC, matcher=Matcher.SEQUENTIAL,
+                       sequential_overlap=2, intrinsics="kruppa")
+    report = run_demo(DemoConfig(out=tmp_path / "demo", num_views=8), config)
+    assert report.sfm.steps["features"].config["front_end"] == "harris-ncc"
+    assert report.sfm.steps["matches"].summary["verified_pairs"] >= 6
+    prior = report.sfm.steps["intrinsics"].summary["cameras"][0]
+    assert prior["prior"] and abs(prior["focal_px"] / 600.0 - 1) < 0.01
+    assert report.sfm.mapping["registered"] == 8
+    assert abs(report.focal_rel_error) < 0.01
+    assert max(report.rotation_error_deg.values()) < 0.5
