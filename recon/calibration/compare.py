@@ -109,7 +109,7 @@ class Comparison:
             )
         ok = sum(p["status"] == "ok" for p in self.pairs)
         fused = (
-            f"; fused {self.fused['focal_px']:.1f} px ±{self.fused['sigma_px']:.1f}, "
+            f"; fused {self.fused['focal_px']:.1f} px ±{self.fused.get('sigma_px') or 0:.1f}, "
             f"{self.fused['status']}"
             if self.fused.get("focal_px") is not None
             else f"; fused: {self.fused.get('status', 'not run')}"

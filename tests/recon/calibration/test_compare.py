@@ -112,3 +112,24 @@ def test_fountain_kruppa_within_half_a_percent(tmp_path):
     assert abs(methods["kruppa"]["rel_error"]) < 0.005
     assert abs(methods["kruppa+ba"]["rel_error"]) < 0.001
     assert methods["kruppa+ba"]["registered"] == 11
+
+
+def test_kruppa_falls_back_when_every_pair_is_singular(tmp_path):
+    """pycolmap's synthetic cameras all aim at the scene centre: no pair determines f. The
+    initialiser must say so and fall back to COLMAP's default (refined), and mapping still
+    recovers the focal."""
+    from recon.sfm import initialise_intrinsics, map_sparse
+    from tests.recon.test_sfm import TRUE_FOCAL as SYNTHETIC_FOCAL
+    from tests.recon.test_sfm import _synthetic_workspace
+
+    ws, _ = _synthetic_workspace(tmp_path)
+    config = SfMConfig(intrinsics="kruppa", intrinsics_options=("refine=false",), num_threads=1)
+    record = initialise_intrinsics(ws, config)
+    assert record.summary["details"]["fallback"] is True
+    assert record.summary["refine_focal"] is True  # a default guess is never frozen
+    assert any("falling back to colmap-default" in n for n in record.summary["notes"])
+    assert record.summary["cameras"][0]["prior"] is False
+    statuses = {p["status"] for p in record.summary["details"]["pairs"]}
+    assert "ok" not in statuses and "near-singular" in statuses
+    mapping = map_sparse(ws, config)
+    assert mapping.summary["cameras"][0]["focal_px"] == pytest.approx(SYNTHETIC_FOCAL, rel=1e-3)
