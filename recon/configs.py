@@ -39,12 +39,21 @@ def add_config_arguments(
         if kind is bool:
             kwargs["action"] = argparse.BooleanOptionalAction
         elif typing.get_origin(kind) is tuple:
-            kwargs.update(action="append", metavar="KEY=VALUE")
+            # Repeatable flag: each occurrence adds one element, parsed as the element type.
+            element = typing.get_args(kind)[0]
+            kwargs.update(action="append", metavar=f.metadata.get("metavar", "VALUE"))
+            if isinstance(element, type) and issubclass(element, enum.Enum):
+                kwargs.update(choices=[m.value for m in element], type=str, metavar=None)
+            elif element in (int, float):
+                kwargs["type"] = element
         elif isinstance(kind, type) and issubclass(kind, enum.Enum):
             kwargs.update(choices=[m.value for m in kind], type=str)
         else:
             kwargs.update(type=kind, metavar=f.name.split("_")[-1].upper())
-        if default not in (None, ()):
+        if isinstance(default, tuple) and default:
+            shown = ", ".join(str(getattr(v, "value", v)) for v in default)
+            help_text += f" (default: {shown})"
+        elif default not in (None, ()):
             help_text += f" (default: {default})"
         group.add_argument(*flags, help=help_text, **kwargs)
 
@@ -61,7 +70,9 @@ def config_from_args(cls: type, args: argparse.Namespace, **overrides: Any) -> A
         if isinstance(kind, type) and issubclass(kind, enum.Enum):
             value = kind(value)
         elif typing.get_origin(kind) is tuple:
-            value = tuple(value)
+            element = typing.get_args(kind)[0]
+            is_enum = isinstance(element, type) and issubclass(element, enum.Enum)
+            value = tuple(element(v) for v in value) if is_enum else tuple(value)
         values[f.name] = value
     values.update(overrides)
     return cls(**values)

@@ -72,6 +72,7 @@ class SfMConfig:
         metadata={
             "help": "an option of the initialiser as KEY=VALUE (repeatable; see `mocap plugins`)",
             "flags": ("-O", "--intrinsics-option"),
+            "metavar": "KEY=VALUE",
         },
     )
     camera_model: str = field(
