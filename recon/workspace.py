@@ -18,6 +18,7 @@ never leaves a file that a later step would trust.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import json
 import os
@@ -42,7 +43,9 @@ _PACKAGES = (
 )
 
 
+@functools.cache
 def package_versions() -> dict[str, str]:
+    """Versions of Python and of the packages a run depends on (read once per process)."""
     versions = {"python": platform.python_version()}
     for name in _PACKAGES:
         try:
@@ -255,7 +258,7 @@ class Workspace:
             ) from None
 
     def _write_run(self, run: dict[str, Any]) -> None:
-        run["versions"] = package_versions()
+        run["versions"] = dict(package_versions())
         run["updated"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
         write_json_atomic(self.run_json, run)
 

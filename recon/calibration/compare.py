@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from recon import plots
 from recon.errors import UserError
 from recon.evaluation import GroundTruth, load_ground_truth
 from recon.images import exif_focal_px
@@ -204,6 +203,8 @@ def _write_outputs(
     fused: dict[str, Any],
     config: CompareConfig,
 ) -> dict[str, Path]:
+    from recon import plots  # matplotlib: only when there is something to plot
+
     folder = ws.root / "compare"
     folder.mkdir(exist_ok=True)
     comparison = Comparison(truth, methods, pairs, fused, {})

@@ -76,10 +76,7 @@ from typing import Any
 
 import cv2
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
-from recon import plots
 from recon.calibration.initialiser import refit_fundamental
 from recon.calibration.kruppa import KruppaConfig, PairStatus, focal_from_fundamental
 from recon.workspace import atomic_output, write_json_atomic
@@ -243,6 +240,9 @@ def _skew(v: np.ndarray) -> np.ndarray:
 
 
 def _rotation(axis: Sequence[float], angle_deg: float) -> np.ndarray:
+    # Imported here: scipy costs ~0.3 s, and `mocap --help` needs none of it.
+    from scipy.spatial.transform import Rotation
+
     unit = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
     return Rotation.from_rotvec(unit * math.radians(angle_deg)).as_matrix()
 
@@ -354,6 +354,10 @@ def refine_fundamental_sampson(
     ``U``, ``V`` are updated by rotation vectors. Levenberg-Marquardt is monotone, so the cost
     never exceeds that of ``F_initial``'s rank-2 projection.
     """
+    # Imported here: scipy costs ~0.3 s, and `mocap --help` needs none of it.
+    from scipy.optimize import least_squares
+    from scipy.spatial.transform import Rotation
+
     T1, T2 = _hartley_normalisation(points1_px), _hartley_normalisation(points2_px)
     F_normalised = np.linalg.inv(T2).T @ F_initial @ np.linalg.inv(T1)
     U, sv, Vt = np.linalg.svd(F_normalised)
@@ -818,6 +822,9 @@ def _error_curves(report: KruppaNoiseReport) -> dict[str, list[float]]:
 
 def write_kruppa_noise(report: KruppaNoiseReport, out: Path) -> dict[str, Path]:
     """Write OUT/{table.csv, report.md, error_vs_noise.png, results.json}, each atomically."""
+    # Imported here: matplotlib costs ~0.3 s, and `mocap --help` needs none of it.
+    from recon import plots
+
     out.mkdir(parents=True, exist_ok=True)
     outputs = {
         "table": out / "table.csv",
