@@ -68,6 +68,15 @@ def _encoded_image(path: Path, size: tuple[int, int], scale: float) -> rr.Encode
     media = {".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".png": "image/png"}
     if scale >= 1.0 and path.suffix.lower() in media:
         return rr.EncodedImage(contents=path.read_bytes(), media_type=media[path.suffix.lower()])
+    image = thumbnail(path, size, scale)
+    if image is None:
+        return None
+    ok, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 90])
+    return rr.EncodedImage(contents=data.tobytes(), media_type="image/jpeg") if ok else None
+
+
+def thumbnail(path: Path, size: tuple[int, int], scale: float) -> np.ndarray | None:
+    """BGR pixels of the photo (full ``size`` = (w, h)) resized by ``scale``, or None."""
     # JPEG decoders can scale by 1/2, 1/4, 1/8 while decoding (DCT scaling): several times
     # faster than decoding full size, which dominated logging time for large photos.
     flag = cv2.IMREAD_COLOR
@@ -83,8 +92,7 @@ def _encoded_image(path: Path, size: tuple[int, int], scale: float) -> rr.Encode
     target = (round(size[0] * scale), round(size[1] * scale))
     if (image.shape[1], image.shape[0]) != target:
         image = cv2.resize(image, target, interpolation=cv2.INTER_AREA)
-    ok, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 90])
-    return rr.EncodedImage(contents=data.tobytes(), media_type="image/jpeg") if ok else None
+    return image
 
 
 def _display_scale(width: int, height: int) -> float:
