@@ -8,20 +8,28 @@ own, so there is a single loading path for both.
 
 from plugins.protocols import (
     CameraInfo,
+    DenseBackend,
+    DenseContext,
+    DenseResult,
     FocalPrior,
     IntrinsicInitialiser,
     IntrinsicsContext,
     IntrinsicsResult,
+    MeshBackend,
 )
 from plugins.registry import KINDS, PluginError, PluginInfo, available, create, list_plugins
 
 __all__ = [
     "KINDS",
     "CameraInfo",
+    "DenseBackend",
+    "DenseContext",
+    "DenseResult",
     "FocalPrior",
     "IntrinsicInitialiser",
     "IntrinsicsContext",
     "IntrinsicsResult",
+    "MeshBackend",
     "PluginError",
     "PluginInfo",
     "available",

@@ -72,3 +72,47 @@ class IntrinsicInitialiser(Protocol):
     description: ClassVar[str]
 
     def initialise(self, context: IntrinsicsContext) -> IntrinsicsResult: ...
+
+
+@dataclass(frozen=True, kw_only=True)
+class DenseContext:
+    """What a dense backend reads: an undistorted COLMAP workspace and the run's settings."""
+
+    undistorted_dir: Path
+    """COLMAP's undistorted layout: ``images/`` and ``sparse/`` with PINHOLE cameras, possibly
+    downscaled (``--max-image-size``)."""
+    scratch_dir: Path
+    """A folder the backend may write intermediate files to (depth maps, ...)."""
+    num_threads: int = -1
+
+
+@dataclass(frozen=True, kw_only=True)
+class DenseResult:
+    cloud: Any
+    """``open3d.geometry.PointCloud`` in the sparse model's world frame, with colours and
+    normals (oriented towards the cameras that saw each point)."""
+    notes: tuple[str, ...] = ()
+    stats: Mapping[str, Any] = field(default_factory=dict)
+    """JSON-serialisable figures (pairs, points before/after filtering, seconds, ...)."""
+
+
+@runtime_checkable
+class DenseBackend(Protocol):
+    """Turns a calibrated, undistorted image set into a dense coloured point cloud."""
+
+    Options: ClassVar[type]
+    description: ClassVar[str]
+
+    def densify(self, context: DenseContext) -> DenseResult: ...
+
+
+@runtime_checkable
+class MeshBackend(Protocol):
+    """Turns an oriented, coloured point cloud into a triangle mesh with vertex colours."""
+
+    Options: ClassVar[type]
+    description: ClassVar[str]
+
+    def mesh(self, cloud: Any) -> Any:
+        """``open3d.geometry.PointCloud`` in, ``open3d.geometry.TriangleMesh`` out."""
+        ...

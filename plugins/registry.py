@@ -14,7 +14,7 @@ from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
 from plugins.options import OptionsError, describe_options, parse_options
-from plugins.protocols import IntrinsicInitialiser
+from plugins.protocols import DenseBackend, IntrinsicInitialiser, MeshBackend
 
 
 class PluginError(Exception):
@@ -37,6 +37,20 @@ KINDS: dict[str, PluginKind] = {
         protocol=IntrinsicInitialiser,
         method="initialise",
         summary="intrinsic initialisers: set each camera's focal prior before mapping",
+    ),
+    "dense": PluginKind(
+        name="dense",
+        group="mocap.dense",
+        protocol=DenseBackend,
+        method="densify",
+        summary="dense backends: undistorted images and poses → coloured point cloud",
+    ),
+    "mesh": PluginKind(
+        name="mesh",
+        group="mocap.mesh",
+        protocol=MeshBackend,
+        method="mesh",
+        summary="mesh backends: oriented point cloud → triangle mesh with vertex colours",
     ),
 }
 

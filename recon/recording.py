@@ -153,6 +153,34 @@ def log_points(
     rec.log(entity, rr.Points3D(points_in_world, colors=colors, radii=-1.5), static=True)
 
 
+def log_mesh(
+    rec: rr.RecordingStream,
+    entity: str,
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    vertex_colors: np.ndarray | None = None,
+    vertex_normals: np.ndarray | None = None,
+) -> None:
+    """A triangle mesh: ``vertices`` (V, 3) world, ``faces`` (F, 3) int, colours (V, 3) in
+    [0, 1] float or uint8, normals (V, 3) for shading."""
+    colors = None
+    if vertex_colors is not None and len(vertex_colors):
+        colors = np.asarray(vertex_colors)
+        if colors.dtype != np.uint8:
+            colors = np.clip(np.round(colors * 255), 0, 255).astype(np.uint8)
+    rec.log(
+        entity,
+        rr.Mesh3D(
+            vertex_positions=np.asarray(vertices, dtype=np.float32),
+            triangle_indices=np.asarray(faces, dtype=np.uint32),
+            vertex_colors=colors,
+            vertex_normals=None if vertex_normals is None else np.asarray(vertex_normals,
+                                                                           dtype=np.float32),
+        ),
+        static=True,
+    )
+
+
 def log_series(
     rec: rr.RecordingStream, timeline: str, entity: str, values: Sequence[float]
 ) -> None:

@@ -6,6 +6,9 @@ Layout (COLMAP's own, so its GUI and tools open it)::
       images/            photos, hard-linked or copied from the source folder, never modified
       database.db        COLMAP database: cameras, keypoints, matches, two-view geometries
       sparse/0/          largest COLMAP binary model (sparse/1, ... for other models)
+      dense/undistorted/ undistorted (and downscaled) images and PINHOLE model, COLMAP layout
+      dense/fused.ply    dense coloured point cloud with normals
+      mesh/mesh.ply      coloured mesh; mesh.obj and mesh.glb for Blender and the web
       logs/<step>.rrd    one Rerun recording per step
       run.json           config, package versions and timing of every step
 
@@ -137,6 +140,19 @@ class Workspace:
         return self.sparse_dir / "0"
 
     @property
+    def undistorted_dir(self) -> Path:
+        """COLMAP's undistorted layout (images/, sparse/) of the largest model."""
+        return self.root / "dense" / "undistorted"
+
+    @property
+    def dense_cloud_path(self) -> Path:
+        return self.root / "dense" / "fused.ply"
+
+    @property
+    def mesh_dir(self) -> Path:
+        return self.root / "mesh"
+
+    @property
     def logs_dir(self) -> Path:
         return self.root / "logs"
 
@@ -205,7 +221,8 @@ class Workspace:
                     except OSError:
                         shutil.copy2(src, dst)
         # New images invalidate everything derived from the old ones.
-        for stale in (ws.database_path, ws.sparse_dir, ws.run_json):
+        for stale in (ws.database_path, ws.sparse_dir, ws.root / "dense", ws.mesh_dir,
+                      ws.run_json):
             _remove(stale)
         ws._write_run({"format": RUN_FORMAT, "source_images": str(source.resolve()), "steps": {}})
         return ws, notes
