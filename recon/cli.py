@@ -14,6 +14,7 @@ _EPILOG = """examples:
   mocap demo                                  synthetic scene → model, errors vs truth
   mocap init ws/temple --images photos/       make a workspace from a folder of photos
   mocap sfm ws/temple                         sparse model in ws/temple/sparse/0
+  mocap run ws/statue --images photos/        photos → sparse → dense → mesh (PLY/OBJ/GLB)
   mocap sfm ws/temple --intrinsics fixed -O focal_px=1520
   mocap compare ws/temple --gt photos/templeSR_par.txt   focal initialisers vs truth
   mocap experiment kruppa-noise               the thesis' noise experiment, table + plot
@@ -45,6 +46,52 @@ def _cmd_sfm(args: argparse.Namespace) -> None:
         ws = Workspace.open(args.workspace)
     summary = run_sfm(ws, config, overwrite=args.overwrite)
     print("\n".join(summary.lines()))
+
+
+def _cmd_dense(args: argparse.Namespace) -> None:
+    from recon.mvs import DenseConfig, densify
+    from recon.workspace import Workspace
+
+    ws = Workspace.open(args.workspace)
+    record = densify(ws, config_from_args(DenseConfig, args), overwrite=args.overwrite)
+    print(f"dense cloud  {ws.dense_cloud_path}  ({record.summary['points']} points, "
+          f"{record.seconds:.1f} s)")
+    for note in record.summary.get("notes", []):
+        print(f"note         {note}")
+
+
+def _cmd_mesh(args: argparse.Namespace) -> None:
+    from recon.mvs import MeshConfig, make_mesh, mesh_paths
+    from recon.workspace import Workspace
+
+    ws = Workspace.open(args.workspace)
+    record = make_mesh(ws, config_from_args(MeshConfig, args), overwrite=args.overwrite)
+    print(f"mesh         {record.summary['vertices']} vertices, {record.summary['faces']} faces"
+          f" ({record.seconds:.1f} s)")
+    for path in mesh_paths(ws).values():
+        print(f"             {path}")
+
+
+def _cmd_run(args: argparse.Namespace) -> None:
+    from recon.mvs import DenseConfig, MeshConfig, densify, make_mesh, mesh_paths
+    from recon.sfm import SfMConfig, run_sfm
+    from recon.workspace import Workspace
+
+    if args.images is not None:
+        ws, notes = Workspace.create(args.workspace, args.images)
+        for note in notes:
+            print(f"note: {note}", file=sys.stderr)
+    else:
+        ws = Workspace.open(args.workspace)
+    summary = run_sfm(ws, config_from_args(SfMConfig, args), overwrite=args.overwrite)
+    print("\n".join(summary.lines()[:-1]))
+    dense = densify(ws, config_from_args(DenseConfig, args), overwrite=args.overwrite)
+    print(f"dense       {dense.summary['points']} points ({dense.seconds:.1f} s)  "
+          f"{ws.dense_cloud_path}")
+    mesh = make_mesh(ws, config_from_args(MeshConfig, args), overwrite=args.overwrite)
+    print(f"mesh        {mesh.summary['vertices']} vertices, {mesh.summary['faces']} faces "
+          f"({mesh.seconds:.1f} s)  {mesh_paths(ws)['ply']}")
+    print(f"view        mocap view {ws.root}")
 
 
 def _cmd_view(args: argparse.Namespace) -> None:
@@ -110,6 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
     from recon.calibration.compare import CompareConfig
     from recon.calibration.experiment import KruppaNoiseConfig
     from recon.demo import DemoConfig
+    from recon.mvs import DenseConfig, MeshConfig
     from recon.sfm import SfMConfig
 
     parser = argparse.ArgumentParser(
@@ -145,6 +193,37 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true", help="recompute every step")
     add_config_arguments(p, SfMConfig)
     p.set_defaults(func=_cmd_sfm)
+
+    p = sub.add_parser("dense", help="dense coloured point cloud from the sparse model (CPU)",
+                       description="Undistort the registered photos (downscaled to "
+                       "--dense-max-image-size), run the dense backend (default cpu-stereo: "
+                       "rectified stereo on neighbour pairs, left-right and multi-view depth "
+                       "checks) and fuse into WS/dense/fused.ply, with normals and colours.")
+    p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder")
+    p.add_argument("--overwrite", action="store_true", help="recompute every step")
+    add_config_arguments(p, DenseConfig)
+    p.set_defaults(func=_cmd_dense)
+
+    p = sub.add_parser("mesh", help="coloured mesh from the dense cloud (PLY, OBJ, GLB)",
+                       description="Mesh WS/dense/fused.ply (default: screened Poisson, "
+                       "trimmed to the cloud), clean it with pymeshlab and write "
+                       "WS/mesh/mesh.ply, mesh.obj (Blender) and mesh.glb (web).")
+    p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder")
+    p.add_argument("--overwrite", action="store_true", help="recompute every step")
+    add_config_arguments(p, MeshConfig)
+    p.set_defaults(func=_cmd_mesh)
+
+    p = sub.add_parser("run", help="photos → sparse model → dense cloud → mesh, in one go",
+                       description="`mocap sfm`, `mocap dense` and `mocap mesh` in a row; "
+                       "each step resumes from what the workspace holds.")
+    p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder")
+    p.add_argument("--images", type=Path, metavar="DIR",
+                   help="create the workspace from this photo folder first (as `mocap init`)")
+    p.add_argument("--overwrite", action="store_true", help="recompute every step")
+    add_config_arguments(p, SfMConfig, exclude=("num_threads",))
+    add_config_arguments(p, DenseConfig)
+    add_config_arguments(p, MeshConfig)
+    p.set_defaults(func=_cmd_run)
 
     p = sub.add_parser("compare", help="every focal initialiser on the same matches, vs truth",
                        description="Run each intrinsic initialiser (Kruppa, Kruppa + BA, COLMAP "
