@@ -28,6 +28,10 @@ class PluginKind:
     protocol: type
     method: str
     summary: str
+    choose_flag: str
+    """The CLI flag that picks a plugin of this kind."""
+    option_flag: str
+    """The CLI flag that passes options to this kind's plugins."""
 
 
 KINDS: dict[str, PluginKind] = {
@@ -37,6 +41,8 @@ KINDS: dict[str, PluginKind] = {
         protocol=IntrinsicInitialiser,
         method="initialise",
         summary="intrinsic initialisers: set each camera's focal prior before mapping",
+        choose_flag="--intrinsics",
+        option_flag="-O",
     ),
     "dense": PluginKind(
         name="dense",
@@ -44,6 +50,8 @@ KINDS: dict[str, PluginKind] = {
         protocol=DenseBackend,
         method="densify",
         summary="dense backends: undistorted images and poses → coloured point cloud",
+        choose_flag="--dense",
+        option_flag="--dense-option",
     ),
     "mesh": PluginKind(
         name="mesh",
@@ -51,6 +59,8 @@ KINDS: dict[str, PluginKind] = {
         protocol=MeshBackend,
         method="mesh",
         summary="mesh backends: oriented point cloud → triangle mesh with vertex colours",
+        choose_flag="--mesher",
+        option_flag="--mesh-option",
     ),
 }
 

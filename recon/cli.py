@@ -118,11 +118,12 @@ def _cmd_plugins(args: argparse.Namespace) -> None:
     infos = list_plugins()
     for kind, spec in KINDS.items():
         print(f"{kind} ({spec.group}): {spec.summary}")
+        print(f"  choose with {spec.choose_flag} NAME; options with {spec.option_flag} KEY=VALUE")
         for info in (i for i in infos if i.kind == kind):
-            print(f"  {info.name:<16} {info.description}")
-            print(f"  {'':<16} {info.target}  [{info.distribution}]")
+            print(f"  {info.name:<18} {info.description}")
+            print(f"  {'':<18} {info.target}  [{info.distribution}]")
             for name, kind_text, help_text in info.options:
-                print(f"  {'':<16}   -O {name}=...  {kind_text}  {help_text}")
+                print(f"  {'':<18}   {name}: {kind_text}  {help_text}")
 
 
 def _cmd_demo(args: argparse.Namespace) -> None:

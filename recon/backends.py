@@ -1,0 +1,153 @@
+"""Built-in dense and mesh backends (plugin kinds ``dense`` and ``mesh``).
+
+Registered in ``pyproject.toml`` under ``mocap.dense`` and ``mocap.mesh`` like any third-party
+plugin. The heavy lifting lives in :mod:`recon.dense` (stereo, fusion) and
+:mod:`recon.meshing`; these classes adapt them to the plugin Protocols.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pycolmap
+
+from plugins.protocols import DenseContext, DenseResult
+from recon.errors import UserError
+from recon.progress import bar
+
+
+def load_views(undistorted_dir: Path) -> list[Any]:
+    """The registered views of an undistorted COLMAP workspace, with their sparse points."""
+    import cv2
+
+    from recon.dense.stereo import View
+
+    model = pycolmap.Reconstruction(undistorted_dir / "sparse")
+    views = []
+    for image in sorted(model.images.values(), key=lambda im: im.name):
+        if not image.has_pose:
+            continue
+        camera = model.cameras[image.camera_id]
+        path = undistorted_dir / "images" / image.name
+        pixels = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if pixels is None:
+            raise UserError(f"cannot read undistorted image {path}")
+        seen = [p.point3D_id for p in image.points2D if p.has_point3D()]
+        points = (np.array([model.points3D[i].xyz for i in seen]) if seen
+                  else np.empty((0, 3)))
+        views.append(View(name=image.name, K=camera.calibration_matrix(),
+                          cam_from_world=image.cam_from_world().matrix(), image_bgr=pixels,
+                          points_in_world=points))
+    return views
+
+
+class CpuStereoBackend:
+    description = ("rectified stereo on the CPU: neighbour pairs, OpenCV SGBM with a left-right "
+                   "check, multi-view depth consistency, fused with normals")
+
+    @dataclass(frozen=True, kw_only=True)
+    class Options:
+        max_pairs_per_view: int = field(
+            default=2, metadata={"help": "stereo partners per view"})
+        min_consistent_views: int = field(
+            default=2, metadata={"help": "other views whose depth must agree with a point "
+                                 "(lowered automatically when there are fewer views)"})
+        rel_depth_tol: float = field(
+            default=0.01, metadata={"help": "relative depth agreement between views"})
+
+    def __init__(self, options: Options):
+        self.options = options
+
+    def densify(self, context: DenseContext) -> DenseResult:
+        from recon.dense.fusion import FusionConfig, filter_consistent, fuse
+        from recon.dense.stereo import StereoConfig, depth_from_pair, select_pairs
+
+        views = load_views(context.undistorted_dir)
+        if len(views) < 2:
+            raise UserError(f"{context.undistorted_dir}: {len(views)} view(s); stereo needs 2")
+        stereo = StereoConfig(max_pairs_per_view=self.options.max_pairs_per_view)
+        pairs = select_pairs(views, stereo)
+        if not pairs:
+            raise UserError("no image pair has a usable baseline for stereo "
+                            "(views too close together or too far apart)")
+        progress = bar(len(pairs), "stereo", "pair")
+        depths = []
+        for ref, src in pairs:
+            depths.append(depth_from_pair(views[ref], views[src], stereo))
+            progress.update(1)
+        progress.close()
+        # Two photos have one pair: no third view can confirm a point.
+        needed = min(self.options.min_consistent_views, len(views) - 1)
+        notes = ()
+        if needed < self.options.min_consistent_views:
+            notes = (f"only {len(views)} views: points are confirmed by {needed} other view(s)",)
+        fusion = FusionConfig(min_consistent_views=needed, rel_depth_tol=self.options.rel_depth_tol)
+        kept = filter_consistent(depths, views, fusion)
+        cloud = fuse(kept, views, fusion)
+        valid = int(sum(np.isfinite(d.depth).sum() for d in depths))
+        return DenseResult(cloud=cloud, notes=notes,
+                           stats={"views": len(views), "pairs": len(pairs),
+                                  "depth_pixels": valid})
+
+
+class ColmapPatchMatchBackend:
+    description = "COLMAP's PatchMatch stereo and fusion (needs pycolmap built with CUDA)"
+
+    @dataclass(frozen=True, kw_only=True)
+    class Options:
+        pass
+
+    def __init__(self, options: Options):
+        self.options = options
+
+    def densify(self, context: DenseContext) -> DenseResult:
+        import open3d as o3d
+
+        if not pycolmap.has_cuda:
+            raise UserError(
+                "colmap-patchmatch needs pycolmap with CUDA (this one has none; on Linux with "
+                "an NVIDIA GPU install pycolmap-cuda12); use --dense cpu-stereo, the default")
+        pycolmap.patch_match_stereo(context.undistorted_dir)  # pragma: no cover - needs CUDA
+        fused = context.scratch_dir / "fused.ply"  # pragma: no cover
+        pycolmap.stereo_fusion(fused, context.undistorted_dir)  # pragma: no cover
+        cloud = o3d.io.read_point_cloud(str(fused))  # pragma: no cover
+        cloud.estimate_normals()  # pragma: no cover
+        return DenseResult(cloud=cloud)  # pragma: no cover
+
+
+class PoissonBackend:
+    description = "screened Poisson surface (Open3D), trimmed where the cloud gives no support"
+
+    @dataclass(frozen=True, kw_only=True)
+    class Options:
+        depth: int = field(default=9, metadata={"help": "octree depth (detail vs. time)"})
+        density_quantile: float = field(
+            default=0.02, metadata={"help": "trim vertices below this Poisson density quantile"})
+
+    def __init__(self, options: Options):
+        self.options = options
+
+    def mesh(self, cloud: Any) -> Any:
+        from recon.meshing import PoissonConfig, poisson_mesh
+
+        return poisson_mesh(cloud, PoissonConfig(depth=self.options.depth,
+                                                 density_quantile=self.options.density_quantile))
+
+
+class BallPivotingBackend:
+    description = "ball pivoting (Open3D): interpolates the points, no hole filling"
+
+    @dataclass(frozen=True, kw_only=True)
+    class Options:
+        pass
+
+    def __init__(self, options: Options):
+        self.options = options
+
+    def mesh(self, cloud: Any) -> Any:
+        from recon.meshing import BallPivotingConfig, ball_pivoting_mesh
+
+        return ball_pivoting_mesh(cloud, BallPivotingConfig())
