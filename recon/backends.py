@@ -124,8 +124,13 @@ class PoissonBackend:
     @dataclass(frozen=True, kw_only=True)
     class Options:
         depth: int = field(default=9, metadata={"help": "octree depth (detail vs. time)"})
+        max_distance_factor: float = field(
+            default=3.0, metadata={"help": "remove faces farther than this many point spacings "
+                                   "from the cloud (0: keep all)"})
         density_quantile: float = field(
-            default=0.02, metadata={"help": "trim vertices below this Poisson density quantile"})
+            default=0.0, metadata={"help": "also trim vertices below this Poisson density "
+                                   "quantile (off by default: it opens holes in closed "
+                                   "surfaces)"})
 
     def __init__(self, options: Options):
         self.options = options
@@ -133,8 +138,9 @@ class PoissonBackend:
     def mesh(self, cloud: Any) -> Any:
         from recon.meshing import PoissonConfig, poisson_mesh
 
-        return poisson_mesh(cloud, PoissonConfig(depth=self.options.depth,
-                                                 density_quantile=self.options.density_quantile))
+        return poisson_mesh(cloud, PoissonConfig(
+            depth=self.options.depth, max_distance_factor=self.options.max_distance_factor,
+            density_quantile=self.options.density_quantile))
 
 
 class BallPivotingBackend:
