@@ -63,7 +63,7 @@ class CpuStereoBackend:
 
     def densify(self, context: DenseContext) -> DenseResult:
         from recon.dense.fusion import FusionConfig, filter_consistent, fuse
-        from recon.dense.stereo import StereoConfig, depth_from_pair, select_pairs
+        from recon.dense.stereo import StereoConfig, depths_from_pair, select_pairs
 
         views = load_views(context.undistorted_dir)
         if len(views) < 2:
@@ -76,21 +76,24 @@ class CpuStereoBackend:
         progress = bar(len(pairs), "stereo", "pair")
         depths = []
         for ref, src in pairs:
-            depths.append(depth_from_pair(views[ref], views[src], stereo))
+            # One rectification gives both views' depth maps.
+            depths += depths_from_pair(views[ref], views[src], stereo, ref_index=ref,
+                                       src_index=src)
             progress.update(1)
         progress.close()
         # Two photos have one pair: no third view can confirm a point.
         needed = min(self.options.min_consistent_views, len(views) - 1)
-        notes = ()
+        notes: tuple[str, ...] = ()
         if needed < self.options.min_consistent_views:
             notes = (f"only {len(views)} views: points are confirmed by {needed} other view(s)",)
         fusion = FusionConfig(min_consistent_views=needed, rel_depth_tol=self.options.rel_depth_tol)
         kept = filter_consistent(depths, views, fusion)
         cloud = fuse(kept, views, fusion)
-        valid = int(sum(np.isfinite(d.depth).sum() for d in depths))
-        return DenseResult(cloud=cloud, notes=notes,
-                           stats={"views": len(views), "pairs": len(pairs),
-                                  "depth_pixels": valid})
+        return DenseResult(cloud=cloud, notes=notes, stats={
+            "views": len(views), "pairs": len(pairs),
+            "depth_pixels": int(sum(np.isfinite(d.depth).sum() for d in depths)),
+            "consistent_pixels": int(sum(np.isfinite(d.depth).sum() for d in kept)),
+        })
 
 
 class ColmapPatchMatchBackend:
