@@ -128,10 +128,13 @@ def _cmd_plugins(args: argparse.Namespace) -> None:
 
 def _cmd_demo(args: argparse.Namespace) -> None:
     from recon.demo import DemoConfig, run_demo
+    from recon.mvs import DenseConfig, MeshConfig
     from recon.sfm import SfMConfig
 
     config = config_from_args(DemoConfig, args)
-    report = run_demo(config, config_from_args(SfMConfig, args), overwrite=args.overwrite)
+    report = run_demo(config, config_from_args(SfMConfig, args),
+                      config_from_args(DenseConfig, args), config_from_args(MeshConfig, args),
+                      overwrite=args.overwrite)
     print("\n".join(report.lines()))
 
 
@@ -262,11 +265,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("demo", help="run the pipeline on a synthetic scene and score it",
                        description="Render photos of a synthetic textured room with known "
-                       "cameras, run the pipeline on them, and print the recovered focal length "
-                       "and pose errors against the truth. No download needed.")
+                       "cameras, run the whole pipeline on them (sparse model, dense cloud, "
+                       "mesh), and print the recovered focal length, pose errors and mesh "
+                       "accuracy against the truth. No download needed.")
     add_config_arguments(p, DemoConfig)
     p.add_argument("--overwrite", action="store_true", help="recompute every step")
-    add_config_arguments(p, SfMConfig, exclude=("seed",))
+    add_config_arguments(p, SfMConfig, exclude=("seed", "num_threads"))
+    add_config_arguments(p, DenseConfig)
+    add_config_arguments(p, MeshConfig)
     p.set_defaults(func=_cmd_demo)
     return parser
 

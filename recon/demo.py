@@ -25,6 +25,11 @@ class DemoConfig:
     )
     num_views: int = field(default=12, metadata={"help": "number of synthetic photos (8-20)"})
     seed: int = field(default=0, metadata={"help": "scene seed"})
+    mesh: bool = field(
+        default=True,
+        metadata={"help": "also run dense stereo and meshing, and score the mesh (--no-mesh: "
+                  "sparse model only)"},
+    )
 
 
 @dataclass(frozen=True)
@@ -36,6 +41,8 @@ class DemoReport:
     rotation_error_deg: dict[str, float]
     center_error: dict[str, float]
     scene_extent: float
+    mesh: dict[str, Any] | None = None
+    """Mesh figures against the truth (see :func:`score_mesh`), when the mesh was built."""
 
     def as_dict(self) -> dict[str, Any]:
         rot = np.array(list(self.rotation_error_deg.values()))
@@ -52,6 +59,7 @@ class DemoReport:
                 n: {"rotation_deg": self.rotation_error_deg[n], "center_m": self.center_error[n]}
                 for n in sorted(self.rotation_error_deg)
             },
+            "mesh": self.mesh,
         }
 
     def lines(self) -> list[str]:
@@ -67,6 +75,21 @@ class DemoReport:
             f"  position    median {1000 * d['center_error_m']['median']:.1f} mm, "
             f"max {1000 * d['center_error_m']['max']:.1f} mm "
             f"(cameras span {self.scene_extent:.1f} m)",
+            *self._mesh_lines(),
+        ]
+
+    def _mesh_lines(self) -> list[str]:
+        if self.mesh is None:
+            return []
+        m = self.mesh
+        return [
+            f"  mesh        F-score {m['f_score']:.3f} at {100 * m['threshold_m']:.1f} cm "
+            f"(1% of the scene): precision {m['precision']:.3f}, recall {m['recall']:.3f}",
+            f"              accuracy {1000 * m['accuracy_m']:.1f} mm, completeness "
+            f"{1000 * m['completeness_m']:.1f} mm (means); {m['faces']} faces, "
+            f"{m['dense_points']} dense points",
+            f"  files       {m['files']}",
+            f"  picture     {m['picture']}",
         ]
 
 
@@ -91,10 +114,56 @@ def make_scene(config: DemoConfig) -> tuple[Path, Path, bool]:
     return scene_dir / "images", scene_dir / "truth.json", True
 
 
+def score_mesh(ws: Workspace, config: DemoConfig, estimated: dict[str, np.ndarray],
+               truth: dict[str, Any]) -> dict[str, Any]:
+    """The mesh, aligned to the true world by the camera centres, against the true surfaces
+    seen by two or more cameras: accuracy, completeness and F-score at 1% of the scene extent.
+    Also renders the aligned mesh to WS/mesh/preview.png."""
+    import open3d as o3d
+
+    from recon.evaluation import camera_center, umeyama_sim3
+    from recon.mesh_metrics import RenderView, render_mesh_png, surface_scores
+    from recon.synthetic import SyntheticSceneConfig, render_scene, visible_surface_points
+
+    scene = render_scene(SyntheticSceneConfig(num_views=config.num_views, seed=config.seed))
+    truth_points = visible_surface_points(scene)
+    names = sorted(set(estimated) & set(truth))
+    scale, R, t = umeyama_sim3(
+        np.array([camera_center(estimated[n]) for n in names]),
+        np.array([truth[n].center_in_world for n in names]),
+    )
+    mesh = o3d.io.read_triangle_mesh(str(ws.mesh_dir / "mesh.ply"))
+    vertices = np.asarray(mesh.vertices) @ (scale * R).T + t
+    mesh.vertices = o3d.utility.Vector3dVector(vertices)
+    extent = float(np.linalg.norm(np.ptp(truth_points, axis=0)))
+    scores = surface_scores(mesh, truth_points, threshold=0.01 * extent)
+    picture = render_mesh_png(mesh, ws.mesh_dir / "preview.png",
+                              view=RenderView(up=(0.0, 0.0, 1.0), elevation_deg=35))
+    return {
+        "threshold_m": scores.threshold,
+        "f_score": scores.f_score,
+        "precision": scores.precision,
+        "recall": scores.recall,
+        "accuracy_m": scores.accuracy,
+        "completeness_m": scores.completeness,
+        "chamfer_m": scores.chamfer,
+        "faces": len(mesh.triangles),
+        "dense_points": ws.step("dense").summary["points"],  # type: ignore[union-attr]
+        "files": ", ".join(str(ws.mesh_dir / f"mesh.{e}") for e in ("ply", "obj", "glb")),
+        "picture": str(picture),
+    }
+
+
 def run_demo(
-    config: DemoConfig, sfm_config: SfMConfig | None = None, *, overwrite: bool = False
+    config: DemoConfig,
+    sfm_config: SfMConfig | None = None,
+    dense_config: Any = None,
+    mesh_config: Any = None,
+    *,
+    overwrite: bool = False,
 ) -> DemoReport:
     from recon.evaluation import focal_error, pose_errors, read_truth
+    from recon.mvs import DenseConfig, MeshConfig, densify, make_mesh
 
     images, truth_path, rendered = make_scene(config)
     ws, _ = Workspace.create(config.out, images, overwrite=rendered or overwrite)
@@ -106,6 +175,11 @@ def run_demo(
     true_focal = float(next(iter(truth.values())).K[0, 0])
     focal = float(np.mean([c["focal_px"] for c in summary.mapping["cameras"]]))
     centers = np.array([t.center_in_world for t in truth.values()])
+    mesh = None
+    if config.mesh:
+        densify(ws, dense_config or DenseConfig(), overwrite=overwrite)
+        make_mesh(ws, mesh_config or MeshConfig(), overwrite=overwrite)
+        mesh = score_mesh(ws, config, estimated, truth)
     report = DemoReport(
         sfm=summary,
         true_focal_px=true_focal,
@@ -114,6 +188,7 @@ def run_demo(
         rotation_error_deg=dict(errors.rotation_deg),
         center_error=dict(errors.center),
         scene_extent=float(np.ptp(centers, axis=0).max()),
+        mesh=mesh,
     )
     write_json_atomic(ws.root / "evaluation.json", report.as_dict() | {"config": asdict(config)})
     return report

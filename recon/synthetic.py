@@ -574,3 +574,43 @@ def write_scene(scene: SyntheticScene, images_dir: Path, truth_path: Path) -> No
             raise OSError(f"could not encode {view.name} as PNG")
         _write_bytes_atomic(images_dir / view.name, encoded.tobytes())
     write_truth(Path(truth_path), scene.truth())
+
+
+def visible_surface_points(scene: SyntheticScene, *, step: int = 2, min_views: int = 2,
+                           rel_depth_tol: float = 0.005) -> np.ndarray:
+    """(N, 3) world points of the scene surface seen by at least ``min_views`` cameras.
+
+    The ground truth a multi-view reconstruction can be scored against: every ``step``-th pixel
+    of each view's true depth map, back-projected, kept when at least ``min_views - 1`` other
+    views see the same point (it projects inside them and their true depth agrees within
+    ``rel_depth_tol``), so surfaces only one camera saw do not count as missing.
+    """
+    K, K_inv = scene.K, np.linalg.inv(scene.K)
+    height, width = scene.views[0].depth.shape
+    v, u = np.mgrid[0:height:step, 0:width:step]
+    # Pixel centres at +0.5, COLMAP's convention (as the renderer's K).
+    rays = np.stack([u.ravel() + 0.5, v.ravel() + 0.5, np.ones(u.size)]) 
+    kept = []
+    for i, view in enumerate(scene.views):
+        depth = view.depth[v.ravel(), u.ravel()].astype(np.float64)
+        ok = np.isfinite(depth)
+        points_cam = (K_inv @ rays[:, ok]) * depth[ok]
+        R, t = view.cam_from_world[:, :3], view.cam_from_world[:, 3]
+        points = (R.T @ (points_cam - t[:, None])).T
+        seen = np.zeros(len(points), dtype=int)
+        for j, other in enumerate(scene.views):
+            if j == i:
+                continue
+            Ro, to = other.cam_from_world[:, :3], other.cam_from_world[:, 3]
+            cam = points @ Ro.T + to
+            z = cam[:, 2]
+            pix = cam @ K.T
+            with np.errstate(divide="ignore", invalid="ignore"):
+                x, y = pix[:, 0] / z, pix[:, 1] / z
+            inside = (z > 0) & (x >= 0) & (x < width) & (y >= 0) & (y < height)
+            xi = np.clip(np.floor(x[inside]).astype(int), 0, width - 1)
+            yi = np.clip(np.floor(y[inside]).astype(int), 0, height - 1)
+            agree = np.abs(other.depth[yi, xi] - z[inside]) < rel_depth_tol * z[inside]
+            seen[np.flatnonzero(inside)[agree]] += 1
+        kept.append(points[seen >= min_views - 1])
+    return np.concatenate(kept)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from PIL import Image
 
 from tests.helpers import run_cli
@@ -84,7 +85,8 @@ def test_unknown_plugin_and_bad_option(tmp_path):
 def test_plugins_lists_every_kind():
     result = run_cli("plugins")
     assert result.returncode == 0
-    for name in ("intrinsics", "colmap-default", "exif", "fixed"):
+    for name in ("intrinsics", "colmap-default", "exif", "fixed", "kruppa", "view-graph",
+                 "dense", "cpu-stereo", "colmap-patchmatch", "mesh", "poisson", "ball-pivoting"):
         assert name in result.stdout
 
 
@@ -97,3 +99,23 @@ def test_view_without_display_prints_the_command(tmp_path):
     result = run_cli("view", tmp_path / "ws")
     assert result.returncode == 0
     assert "rerun" in result.stdout and "sfm.rrd" in result.stdout
+
+
+def test_dense_and_mesh_need_their_inputs(tmp_path):
+    _noise_images(tmp_path / "photos", 2)
+    run_cli("init", tmp_path / "ws", "--images", tmp_path / "photos")
+    _assert_one_line_error(run_cli("dense", tmp_path / "ws"), "no sparse model yet")
+    _assert_one_line_error(run_cli("mesh", tmp_path / "ws"), "no dense cloud yet")
+
+
+def test_colmap_patchmatch_without_cuda_names_the_cpu_backend():
+    import pycolmap
+
+    from recon.backends import ColmapPatchMatchBackend
+    from recon.errors import UserError
+
+    if pycolmap.has_cuda:
+        pytest.skip("this pycolmap has CUDA; the backend runs instead of refusing")
+    backend = ColmapPatchMatchBackend(ColmapPatchMatchBackend.Options())
+    with pytest.raises(UserError, match="use --dense cpu-stereo"):
+        backend.densify(None)  # type: ignore[arg-type]

@@ -7,7 +7,7 @@ import json
 from tests.helpers import recording_entities, run_cli
 
 
-def test_demo_recovers_the_known_cameras(tmp_path):
+def test_demo_recovers_the_known_cameras_and_surfaces(tmp_path):
     out = tmp_path / "demo"
     result = run_cli("demo", "--out", out, "--num-views", "10")
     assert result.returncode == 0, result.stderr
@@ -22,10 +22,22 @@ def test_demo_recovers_the_known_cameras(tmp_path):
     assert "/world/points@Points3D:colors" in entities
     assert "/world/cameras/view_000_png/image@EncodedImage:blob" in entities
 
+    # Dense cloud and mesh against the true surfaces seen by 2+ cameras, at 1% of the extent.
+    mesh = evaluation["mesh"]
+    assert mesh["f_score"] >= 0.9
+    assert mesh["precision"] >= 0.95
+    assert mesh["accuracy_m"] < 0.03
+    for ext in ("ply", "obj", "glb"):
+        assert (out / "mesh" / f"mesh.{ext}").stat().st_size > 100_000
+    assert (out / "mesh" / "preview.png").exists()
+    assert "/world/mesh@Mesh3D:vertex_positions" in recording_entities(out / "logs" / "mesh.rrd")
+    assert "/world/dense@Points3D:positions" in recording_entities(out / "logs" / "dense.rrd")
+
     # Idempotent: a second run renders nothing new and reuses every step.
     again = run_cli("demo", "--out", out, "--num-views", "10")
     assert again.returncode == 0, again.stderr
     assert again.stdout.count("(reused)") == 4
+    assert (out / "run.json").read_text().count('"dense"') >= 1
 
 
 def test_sequential_matching_on_the_demo_scene(tmp_path):
@@ -33,7 +45,7 @@ def test_sequential_matching_on_the_demo_scene(tmp_path):
     from recon.sfm import Matcher, SfMConfig
 
     config = SfMConfig(matcher=Matcher.SEQUENTIAL, sequential_overlap=3, max_image_size=480)
-    report = run_demo(DemoConfig(out=tmp_path / "demo", num_views=8), config)
+    report = run_demo(DemoConfig(out=tmp_path / "demo", num_views=8, mesh=False), config)
     matches = report.sfm.steps["matches"]
     assert matches.config["matcher"] == "sequential"
     # Each image is paired with its next 3 (and quadratic overlap 2^k), not with all 7 others.
@@ -49,7 +61,7 @@ def test_thesis_front_end_with_kruppa_on_the_demo_scene(tmp_path):
 
     config = SfMConfig(front_end=FrontEnd.HARRIS_NCC, matcher=Matcher.SEQUENTIAL,
                        sequential_overlap=2, intrinsics="kruppa")
-    report = run_demo(DemoConfig(out=tmp_path / "demo", num_views=8), config)
+    report = run_demo(DemoConfig(out=tmp_path / "demo", num_views=8, mesh=False), config)
     assert report.sfm.steps["features"].config["front_end"] == "harris-ncc"
     assert report.sfm.steps["matches"].summary["verified_pairs"] >= 6
     prior = report.sfm.steps["intrinsics"].summary["cameras"][0]
