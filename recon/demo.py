@@ -122,7 +122,7 @@ def score_mesh(ws: Workspace, config: DemoConfig, estimated: dict[str, np.ndarra
     import open3d as o3d
 
     from recon.evaluation import camera_center, umeyama_sim3
-    from recon.mesh_metrics import RenderView, render_mesh_png, surface_scores
+    from recon.mesh_metrics import render_mesh_png, surface_scores
     from recon.synthetic import SyntheticSceneConfig, render_scene, visible_surface_points
 
     scene = render_scene(SyntheticSceneConfig(num_views=config.num_views, seed=config.seed))
@@ -137,8 +137,12 @@ def score_mesh(ws: Workspace, config: DemoConfig, estimated: dict[str, np.ndarra
     mesh.vertices = o3d.utility.Vector3dVector(vertices)
     extent = float(np.linalg.norm(np.ptp(truth_points, axis=0)))
     scores = surface_scores(mesh, truth_points, threshold=0.01 * extent)
-    picture = render_mesh_png(mesh, ws.mesh_dir / "preview.png",
-                              view=RenderView(up=(0.0, 0.0, 1.0), elevation_deg=35))
+    # Seen from the first photo's camera, pulled back 1.5 m, to compare with that photo.
+    first = truth[names[0]]
+    cam_from_world = first.cam_from_world.copy()
+    cam_from_world[2, 3] += 1.5
+    picture = render_mesh_png(mesh, ws.mesh_dir / "preview.png", width=first.width,
+                              height=first.height, camera=(first.K, cam_from_world))
     return {
         "threshold_m": scores.threshold,
         "f_score": scores.f_score,

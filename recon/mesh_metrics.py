@@ -282,15 +282,22 @@ def render_mesh(
     width: int = 800,
     height: int = 600,
     view: RenderView = RenderView(),
+    camera: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Rendering:
     """Ray-cast picture of ``mesh`` from :func:`framing_camera`, on the CPU, without OpenGL.
+
+    ``camera`` = (K (3, 3) for ``width`` x ``height``, cam_from_world (3, 4)) renders from a
+    given camera instead, for example one of the photos' (the picture then matches it).
 
     Each pixel's colour is the vertex colours (grey without them) interpolated at the hit point,
     times ``ambient + (1 - ambient) |cos|`` of the angle between the face normal and the ray: a
     Lambert term for a light at the camera, which lights both sides of a face.
     """
     vertices, triangles = _triangles_in(mesh)
-    K, cam_from_world = framing_camera(mesh, width=width, height=height, view=view)
+    if camera is None:
+        K, cam_from_world = framing_camera(mesh, width=width, height=height, view=view)
+    else:
+        K, cam_from_world = (np.asarray(m, dtype=np.float64) for m in camera)
     rotation, translation = cam_from_world[:, :3], cam_from_world[:, 3]
     eye = -rotation.T @ translation
     centre = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))  # float32 about here
@@ -332,12 +339,13 @@ def render_mesh_png(
     width: int = 800,
     height: int = 600,
     view: RenderView = RenderView(),
+    camera: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Path:
     """Write :func:`render_mesh`'s picture of ``mesh`` to ``path`` (.png), atomically."""
     path = Path(path)
     if path.suffix.lower() != ".png":
         raise ValueError(f"render_mesh_png: {path} must end in .png")
-    rendering = render_mesh(mesh, width=width, height=height, view=view)
+    rendering = render_mesh(mesh, width=width, height=height, view=view, camera=camera)
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_name(f"{path.stem}.partial{path.suffix}")  # cv2 wants the real suffix
     try:
