@@ -81,8 +81,9 @@ class CpuStereoBackend:
                                        src_index=src)
             progress.update(1)
         progress.close()
-        # Two photos have one pair: no third view can confirm a point.
-        needed = min(self.options.min_consistent_views, len(views) - 1)
+        # Two photos have one pair, whose two depth maps agree by construction: no other view
+        # can confirm a point, so only the left-right check filters them.
+        needed = min(self.options.min_consistent_views, len(views) - 2)
         notes: tuple[str, ...] = ()
         if needed < self.options.min_consistent_views:
             notes = (f"only {len(views)} views: points are confirmed by {needed} other view(s)",)

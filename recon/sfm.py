@@ -499,6 +499,8 @@ def map_sparse(ws: Workspace, config: SfMConfig, *, overwrite: bool = False) -> 
     options.ba_refine_focal_length = refine
     options.mapper.abs_pose_refine_focal_length = refine
     num_images = len(ws.image_names())
+    # COLMAP discards models under 10 images; a smaller photo set is still a valid model.
+    options.min_model_size = min(options.min_model_size, num_images)
     with Timer() as timer, atomic_output(ws.sparse_dir) as out:
         raw = out / "unsorted"
         raw.mkdir(parents=True)
@@ -514,10 +516,19 @@ def map_sparse(ws: Workspace, config: SfMConfig, *, overwrite: bool = False) -> 
                 )
 
             try:
-                models = pycolmap.incremental_mapping(
-                    ws.database_path, ws.images_dir, raw, options=options,
-                    next_image_callback=on_image,
-                )
+                if num_images == 2:
+                    # The thesis' two-photo case: E from the verified F and the focal, the pose
+                    # in front of both cameras, triangulation, BA (recon.twoview).
+                    from recon.twoview import two_view_model
+
+                    models = {0: two_view_model(ws.database_path, ws.images_dir,
+                                                refine_focal=refine)}
+                    progress.update(2)
+                else:
+                    models = pycolmap.incremental_mapping(
+                        ws.database_path, ws.images_dir, raw, options=options,
+                        next_image_callback=on_image,
+                    )
             finally:
                 progress.close()
             if not models:

@@ -23,6 +23,7 @@ import pycolmap
 from plugins.protocols import FocalPrior, IntrinsicsContext, IntrinsicsResult
 from recon.calibration.fusion import (
     FocalEstimate,
+    FusionConfig,
     FusionMethod,
     FusionStatus,
     estimate_focal_joint,
@@ -155,8 +156,15 @@ class KruppaInitialiser:
             estimate, pair_rows = self._estimate_group(rows, set(camera_ids), size, principal)
             table += pair_rows
             fused[f"{size[0]}x{size[1]}"] = _estimate_dict(estimate)
+            # A lone pair (two photos) that is itself well conditioned is trusted: there is no
+            # spread to measure an uncertainty from, which is all that flags it.
+            lone_ok_pair = estimate.num_pairs_used == 1 and dict(estimate.status_counts) == {
+                "ok": 1
+            }
             usable = estimate.focal_px is not None and (
-                estimate.status == FusionStatus.OK or self.options.accept_low_confidence
+                estimate.status == FusionStatus.OK
+                or lone_ok_pair
+                or self.options.accept_low_confidence
             )
             label = f"{size[0]}x{size[1]} cameras"
             if not usable:
@@ -169,6 +177,11 @@ class KruppaInitialiser:
                     f"kruppa: no trustworthy focal for {label} ({found}; "
                     f"{_counts(estimate)}); falling back to colmap-default"
                 )
+            elif lone_ok_pair and estimate.status != FusionStatus.OK:
+                notes.append(
+                    f"kruppa: one image pair only: {label} focal {estimate.focal_px:.1f} px from "
+                    "it alone, without an uncertainty"
+                )
             elif estimate.status != FusionStatus.OK:
                 notes.append(
                     f"kruppa: {label} focal {estimate.focal_px:.1f} px is {estimate.status} "
@@ -180,8 +193,8 @@ class KruppaInitialiser:
                         camera_id=camera_id,
                         focal_px=estimate.focal_px if usable else None,
                         source=(
-                            f"kruppa {estimate.num_pairs_used}/{estimate.num_pairs} pairs, "
-                            f"±{estimate.sigma_px or 0:.1f} px"
+                            f"kruppa {estimate.num_pairs_used}/{estimate.num_pairs} pairs"
+                            + (f", ±{estimate.sigma_px:.1f} px" if estimate.sigma_px else "")
                             if usable
                             else "1.2·max(w, h) (kruppa fallback)"
                         ),
@@ -237,7 +250,10 @@ class KruppaInitialiser:
             if self.options.fusion is FusionMethod.JOINT
             else fuse_pair_focals
         )
-        return fuse(pairs, num_inliers=inliers, image_ids=ids), table
+        # Two photos give one pair: its estimate is all there is (the thesis' chapter 5 case),
+        # so fewer pairs than the usual minimum do not make it low-confidence by themselves.
+        config = FusionConfig(min_pairs=max(1, min(FusionConfig().min_pairs, len(pairs))))
+        return fuse(pairs, num_inliers=inliers, image_ids=ids, config=config), table
 
 
 def refit_fundamental(
