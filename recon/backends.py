@@ -53,8 +53,10 @@ class CpuStereoBackend:
         max_pairs_per_view: int = field(
             default=2, metadata={"help": "stereo partners per view"})
         min_consistent_views: int = field(
-            default=2, metadata={"help": "other views whose depth must agree with a point "
-                                 "(lowered automatically when there are fewer views)"})
+            # 1 (besides the stereo partner) was measured on the demo scene: F-score 0.906 ->
+            # 0.920 at 1% of the extent, precision 1.000 and accuracy (8.5-8.7 mm) unchanged.
+            default=1, metadata={"help": "views other than the stereo partner whose depth must "
+                                 "agree with a point (lowered when there are too few views)"})
         rel_depth_tol: float = field(
             default=0.01, metadata={"help": "relative depth agreement between views"})
 
