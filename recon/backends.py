@@ -134,9 +134,9 @@ class PoissonBackend:
             default=3.0, metadata={"help": "remove faces farther than this many point spacings "
                                    "from the cloud (0: keep all)"})
         density_quantile: float = field(
-            default=0.0, metadata={"help": "also trim vertices below this Poisson density "
-                                   "quantile (off by default: it opens holes in closed "
-                                   "surfaces)"})
+            default=0.01, metadata={"help": "also trim vertices below this quantile of Poisson "
+                                    "density (low support); keep it small, it can open holes "
+                                    "in closed surfaces"})
 
     def __init__(self, options: Options):
         self.options = options

@@ -119,3 +119,15 @@ def test_colmap_patchmatch_without_cuda_names_the_cpu_backend():
     backend = ColmapPatchMatchBackend(ColmapPatchMatchBackend.Options())
     with pytest.raises(UserError, match="use --dense cpu-stereo"):
         backend.densify(None)  # type: ignore[arg-type]
+
+
+@pytest.mark.skipif(
+    not __import__("pycolmap").has_cuda,
+    reason="colmap-patchmatch needs pycolmap built with CUDA; this machine's has none",
+)
+def test_colmap_patchmatch_with_cuda(tmp_path):  # pragma: no cover - runs on CUDA machines
+    out = tmp_path / "demo"
+    assert run_cli("demo", "--out", out, "--num-views", "8", "--no-mesh").returncode == 0
+    result = run_cli("dense", out, "--dense", "colmap-patchmatch")
+    assert result.returncode == 0, result.stderr
+    assert (out / "dense" / "fused.ply").stat().st_size > 10_000

@@ -34,10 +34,14 @@ def test_demo_recovers_the_known_cameras_and_surfaces(tmp_path):
     assert "/world/dense@Points3D:positions" in recording_entities(out / "logs" / "dense.rrd")
 
     # Idempotent: a second run renders nothing new and reuses every step.
+    steps = json.loads((out / "run.json").read_text())["steps"]
+    finished = {k: v["finished"] for k, v in steps.items()}
     again = run_cli("demo", "--out", out, "--num-views", "10")
     assert again.returncode == 0, again.stderr
     assert again.stdout.count("(reused)") == 4
-    assert (out / "run.json").read_text().count('"dense"') >= 1
+    steps = json.loads((out / "run.json").read_text())["steps"]
+    assert {k: v["finished"] for k, v in steps.items()} == finished  # dense and mesh too
+    assert {"undistort", "dense", "mesh"} <= set(finished)
 
 
 def test_sequential_matching_on_the_demo_scene(tmp_path):
