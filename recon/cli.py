@@ -295,9 +295,11 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     _quiet_colmap(args.verbose)
+    from plugins.registry import PluginError
+
     try:
         args.func(args)
-    except UserError as exc:
+    except (UserError, PluginError) as exc:
         print(f"mocap {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

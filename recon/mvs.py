@@ -82,8 +82,8 @@ def undistort(ws: Workspace, config: DenseConfig, *, overwrite: bool = False) ->
         raise UserError(f"{ws.root}: {registered} registered image(s); dense stereo needs 2")
     settings = {"max_image_size": config.dense_max_image_size}
     fp = fingerprint("undistort", settings, upstream.fingerprint)
-    if not overwrite and ws.is_done("undistort", fp, ws.undistorted_dir):
-        return ws.step("undistort")  # type: ignore[return-value]
+    if done := ws.reusable("undistort", fp, ws.undistorted_dir, overwrite=overwrite):
+        return done
     options = pycolmap.UndistortCameraOptions()
     options.max_image_size = config.dense_max_image_size
     ws.undistorted_dir.parent.mkdir(parents=True, exist_ok=True)
@@ -108,12 +108,9 @@ def densify(ws: Workspace, config: DenseConfig, *, overwrite: bool = False) -> S
     upstream = undistort(ws, config, overwrite=overwrite)
     settings = {"dense": config.dense, "options": list(config.dense_options)}
     fp = fingerprint("dense", settings, upstream.fingerprint)
-    if not overwrite and ws.is_done("dense", fp, ws.dense_cloud_path):
-        return ws.step("dense")  # type: ignore[return-value]
-    try:
-        backend = plugins.create("dense", config.dense, config.dense_options)
-    except plugins.PluginError as exc:
-        raise UserError(str(exc)) from None
+    if done := ws.reusable("dense", fp, ws.dense_cloud_path, overwrite=overwrite):
+        return done
+    backend = plugins.create("dense", config.dense, config.dense_options)
     with Timer() as timer, tempfile.TemporaryDirectory(dir=ws.root, prefix=".dense-") as tmp:
         result: DenseResult = backend.densify(
             DenseContext(undistorted_dir=ws.undistorted_dir, scratch_dir=Path(tmp),
@@ -183,12 +180,9 @@ def make_mesh(ws: Workspace, config: MeshConfig, *, overwrite: bool = False) -> 
                 "faces": config.faces, "min_component_fraction": config.min_component_fraction}
     fp = fingerprint("mesh", settings, upstream.fingerprint)
     paths = mesh_paths(ws)
-    if not overwrite and ws.is_done("mesh", fp, *paths.values()):
-        return ws.step("mesh")  # type: ignore[return-value]
-    try:
-        backend = plugins.create("mesh", config.mesher, config.mesh_options)
-    except plugins.PluginError as exc:
-        raise UserError(str(exc)) from None
+    if done := ws.reusable("mesh", fp, *paths.values(), overwrite=overwrite):
+        return done
+    backend = plugins.create("mesh", config.mesher, config.mesh_options)
     with Timer() as timer:
         cloud = o3d.io.read_point_cloud(str(ws.dense_cloud_path))
         try:

@@ -160,8 +160,8 @@ def extract_features(ws: Workspace, config: SfMConfig, *, overwrite: bool = Fals
         "images": names,
     }
     fp = fingerprint("features", settings)
-    if not overwrite and ws.is_done("features", fp, ws.database_path):
-        return ws.step("features")  # type: ignore[return-value]
+    if done := ws.reusable("features", fp, ws.database_path, overwrite=overwrite):
+        return done
 
     reader = pycolmap.ImageReaderOptions(camera_model=config.camera_model)
     extraction = pycolmap.FeatureExtractionOptions()
@@ -316,8 +316,8 @@ def match_features(ws: Workspace, config: SfMConfig, *, overwrite: bool = False)
         matcher = Matcher.EXHAUSTIVE if num_images <= EXHAUSTIVE_MAX_IMAGES else Matcher.SEQUENTIAL
     settings = {"matcher": str(matcher), "sequential_overlap": config.sequential_overlap}
     fp = fingerprint("matches", settings, upstream.fingerprint)
-    if not overwrite and ws.is_done("matches", fp, ws.database_path):
-        return ws.step("matches")  # type: ignore[return-value]
+    if done := ws.reusable("matches", fp, ws.database_path, overwrite=overwrite):
+        return done
 
     matching = pycolmap.FeatureMatchingOptions()
     matching.num_threads = config.num_threads
@@ -408,13 +408,10 @@ def initialise_intrinsics(
         raise UserError(f"{ws.root}: no matches yet; run `mocap sfm {ws.root}`")
     settings = {"intrinsics": config.intrinsics, "options": list(config.intrinsics_options)}
     fp = fingerprint("intrinsics", settings, upstream.fingerprint)
-    if not overwrite and ws.is_done("intrinsics", fp, ws.database_path):
-        return ws.step("intrinsics")  # type: ignore[return-value]
+    if done := ws.reusable("intrinsics", fp, ws.database_path, overwrite=overwrite):
+        return done
 
-    try:
-        initialiser = plugins.create("intrinsics", config.intrinsics, config.intrinsics_options)
-    except plugins.PluginError as exc:
-        raise UserError(str(exc)) from None
+    initialiser = plugins.create("intrinsics", config.intrinsics, config.intrinsics_options)
     with Timer() as timer, atomic_output(ws.database_path, seed_from=ws.database_path) as db:
         cameras = database_cameras(db)
         result: IntrinsicsResult = initialiser.initialise(
@@ -487,8 +484,8 @@ def map_sparse(ws: Workspace, config: SfMConfig, *, overwrite: bool = False) -> 
         refine = upstream.summary["refine_focal"]
     settings = {"refine_focal": refine, "seed": config.seed}
     fp = fingerprint("mapping", settings, upstream.fingerprint)
-    if not overwrite and ws.is_done("mapping", fp, ws.model_dir):
-        return ws.step("mapping")  # type: ignore[return-value]
+    if done := ws.reusable("mapping", fp, ws.model_dir, overwrite=overwrite):
+        return done
 
     pycolmap.set_random_seed(config.seed)
     options = pycolmap.IncrementalPipelineOptions()

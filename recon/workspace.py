@@ -293,6 +293,13 @@ class Workspace:
             and all(p.exists() for p in outputs)
         )
 
+    def reusable(self, name: str, step_fingerprint: str, *outputs: Path,
+                 overwrite: bool = False) -> StepRecord | None:
+        """The record of step ``name`` when its result can be reused as it is, else None."""
+        if overwrite or not self.is_done(name, step_fingerprint, *outputs):
+            return None
+        return self.step(name)
+
     def record_step(
         self,
         name: str,
