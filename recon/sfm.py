@@ -20,8 +20,9 @@ from __future__ import annotations
 import enum
 import importlib
 import shutil
-import threading
 from collections import defaultdict
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -140,6 +141,52 @@ def _device() -> pycolmap.Device:
     return pycolmap.Device.cuda if pycolmap.has_cuda else pycolmap.Device.cpu
 
 
+class DeferredRecordings:
+    """Recording jobs of the SfM steps, run on one background thread once mapping starts.
+
+    Extraction and matching keep both cores busy, incremental mapping of a small set only one;
+    importing rerun (~0.3 s) and writing the features, matches and intrinsics recordings then
+    costs no wall time. Jobs read only finished files (the renamed database), and
+    :meth:`finish` waits for them, so a step's recording exists when ``run_sfm`` returns.
+    """
+
+    def __init__(self) -> None:
+        self._jobs: list[tuple[Callable[..., None], tuple[Any, ...]]] = []
+        self._pool: ThreadPoolExecutor | None = None
+        self._futures: list[Future[None]] = []
+
+    def submit(self, job: Callable[..., None], *args: Any) -> None:
+        if self._pool is None:
+            self._jobs.append((job, args))
+        else:
+            self._futures.append(self._pool.submit(job, *args))
+
+    def start(self) -> None:
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="recordings")
+            self._futures.append(self._pool.submit(importlib.import_module, "recon.recording"))
+            for job, args in self._jobs:
+                self._futures.append(self._pool.submit(job, *args))
+            self._jobs.clear()
+
+    def finish(self) -> None:
+        """Run what is left and wait; re-raise the first job's error."""
+        self.start()
+        assert self._pool is not None
+        try:
+            for future in self._futures:
+                future.result()
+        finally:
+            self._pool.shutdown()
+
+
+def _record(recordings: DeferredRecordings | None, job: Callable[..., None], *args: Any) -> None:
+    if recordings is None:
+        job(*args)
+    else:
+        recordings.submit(job, *args)
+
+
 # Features ------------------------------------------------------------------------------------
 def resolve_camera_mode(ws: Workspace, mode: CameraMode) -> CameraMode:
     if mode is not CameraMode.AUTO:
@@ -148,7 +195,10 @@ def resolve_camera_mode(ws: Workspace, mode: CameraMode) -> CameraMode:
     return CameraMode.SINGLE if len(keys) == 1 else CameraMode.PER_IMAGE
 
 
-def extract_features(ws: Workspace, config: SfMConfig, *, overwrite: bool = False) -> StepRecord:
+def extract_features(
+    ws: Workspace, config: SfMConfig, *, overwrite: bool = False,
+    recordings: DeferredRecordings | None = None,
+) -> StepRecord:
     names = ws.image_names()
     if len(names) < 2:
         raise UserError(f"{ws.images_dir} holds {len(names)} image(s); SfM needs at least 2")
@@ -193,7 +243,7 @@ def extract_features(ws: Workspace, config: SfMConfig, *, overwrite: bool = Fals
             num_cameras = database.num_cameras()
         if num_images != len(names):
             raise UserError(f"COLMAP read {num_images} of {len(names)} images in {ws.images_dir}")
-        _log_features(ws, db)
+    _record(recordings, _log_features, ws, ws.database_path)
     return ws.record_step(
         "features",
         fp,
@@ -306,7 +356,10 @@ def _log_features(ws: Workspace, database_path: Path) -> None:
 
 
 # Matches -------------------------------------------------------------------------------------
-def match_features(ws: Workspace, config: SfMConfig, *, overwrite: bool = False) -> StepRecord:
+def match_features(
+    ws: Workspace, config: SfMConfig, *, overwrite: bool = False,
+    recordings: DeferredRecordings | None = None,
+) -> StepRecord:
     upstream = ws.step("features")
     if upstream is None or not ws.database_path.exists():
         raise UserError(f"{ws.root}: no features yet; run `mocap sfm {ws.root}`")
@@ -344,7 +397,7 @@ def match_features(ws: Workspace, config: SfMConfig, *, overwrite: bool = False)
                     db, matching_options=matching, pairing_options=pairing, device=_device()
                 )
         pairs = verified_pairs(db)
-        _log_matches(ws, pairs)
+    _record(recordings, _log_matches, ws, pairs)
     verified = [p for p in pairs if p["inliers"] > 0]
     return ws.record_step(
         "matches",
@@ -401,7 +454,8 @@ def database_cameras(database_path: Path) -> tuple[CameraInfo, ...]:
 
 
 def initialise_intrinsics(
-    ws: Workspace, config: SfMConfig, *, overwrite: bool = False
+    ws: Workspace, config: SfMConfig, *, overwrite: bool = False,
+    recordings: DeferredRecordings | None = None,
 ) -> StepRecord:
     upstream = ws.step("matches")
     if upstream is None:
@@ -418,7 +472,7 @@ def initialise_intrinsics(
             IntrinsicsContext(database_path=db, images_dir=ws.images_dir, cameras=cameras)
         )
         applied = _write_focal_priors(db, result)
-        _log_intrinsics(ws, config.intrinsics, applied)
+    _record(recordings, _log_intrinsics, ws, config.intrinsics, applied)
     return ws.record_step(
         "intrinsics",
         fp,
@@ -473,9 +527,10 @@ def _write_focal_priors(database_path: Path, result: IntrinsicsResult) -> list[d
 
 
 # Mapping -------------------------------------------------------------------------------------
-def map_sparse(ws: Workspace, config: SfMConfig, *, overwrite: bool = False) -> StepRecord:
-    from recon import recording
-
+def map_sparse(
+    ws: Workspace, config: SfMConfig, *, overwrite: bool = False,
+    recordings: DeferredRecordings | None = None,
+) -> StepRecord:
     upstream = ws.step("intrinsics")
     if upstream is None:
         raise UserError(f"{ws.root}: intrinsics not initialised; run `mocap sfm {ws.root}`")
@@ -501,45 +556,47 @@ def map_sparse(ws: Workspace, config: SfMConfig, *, overwrite: bool = False) -> 
     with Timer() as timer, atomic_output(ws.sparse_dir) as out:
         raw = out / "unsorted"
         raw.mkdir(parents=True)
-        with recording.step_recording(ws.log_path("mapping"), "mapping") as rec:
-            progress = bar(num_images, "mapping", "img")
-            registered = [0]
+        progress = bar(num_images, "mapping", "img")
+        # Registered-image count after each registration, logged once mapping is done.
+        registrations: list[int] = []
 
-            def on_image() -> None:
-                registered[0] += 1
-                progress.update(1)
-                recording.log_scalar(
-                    rec, "registration", registered[0], "stats/registered_images", registered[0]
+        def on_image() -> None:
+            registrations.append(len(registrations) + 1)
+            progress.update(1)
+
+        if recordings is not None:
+            # Mapping keeps one core busy at most on small sets: write the queued recordings
+            # (and import rerun) on the other one meanwhile.
+            recordings.start()
+        try:
+            if num_images == 2:
+                # The thesis' two-photo case: E from the verified F and the focal, the pose
+                # in front of both cameras, triangulation, BA (recon.twoview).
+                from recon.twoview import two_view_model
+
+                models = {0: two_view_model(ws.database_path, ws.images_dir,
+                                            refine_focal=refine)}
+                registrations += [1, 2]
+                progress.update(2)
+            else:
+                models = pycolmap.incremental_mapping(
+                    ws.database_path, ws.images_dir, raw, options=options,
+                    next_image_callback=on_image,
                 )
-
-            try:
-                if num_images == 2:
-                    # The thesis' two-photo case: E from the verified F and the focal, the pose
-                    # in front of both cameras, triangulation, BA (recon.twoview).
-                    from recon.twoview import two_view_model
-
-                    models = {0: two_view_model(ws.database_path, ws.images_dir,
-                                                refine_focal=refine)}
-                    progress.update(2)
-                else:
-                    models = pycolmap.incremental_mapping(
-                        ws.database_path, ws.images_dir, raw, options=options,
-                        next_image_callback=on_image,
-                    )
-            finally:
-                progress.close()
-            if not models:
-                raise UserError(
-                    f"mapping registered no images in {ws.root}: the photos do not overlap "
-                    "enough (see logs/matches.rrd for verified pairs)"
-                )
-            ordered = sorted(models.values(), key=lambda r: r.num_reg_images(), reverse=True)
-            for index, model in enumerate(ordered):
-                (out / str(index)).mkdir()
-                model.write(out / str(index))
-            shutil.rmtree(raw)
-            summary = model_summary(ordered[0], num_images) | {"models": len(ordered)}
-            _log_model(rec, ws, ordered[0])
+        finally:
+            progress.close()
+        if not models:
+            raise UserError(
+                f"mapping registered no images in {ws.root}: the photos do not overlap "
+                "enough (see logs/matches.rrd for verified pairs)"
+            )
+        ordered = sorted(models.values(), key=lambda r: r.num_reg_images(), reverse=True)
+        for index, model in enumerate(ordered):
+            (out / str(index)).mkdir()
+            model.write(out / str(index))
+        shutil.rmtree(raw)
+        summary = model_summary(ordered[0], num_images) | {"models": len(ordered)}
+        _log_mapping(ws, ordered[0], registrations)
     return ws.record_step("mapping", fp, config=settings, seconds=timer.seconds, summary=summary)
 
 
@@ -587,6 +644,15 @@ def per_image_reprojection_error(model: pycolmap.Reconstruction) -> dict[str, fl
                     residuals.append(np.linalg.norm(projected - p2d.xy))
         errors[image.name] = float(np.mean(residuals)) if residuals else float("nan")
     return errors
+
+
+def _log_mapping(ws: Workspace, model: pycolmap.Reconstruction, registrations: list[int]
+                 ) -> None:
+    from recon import recording
+
+    with recording.step_recording(ws.log_path("mapping"), "mapping") as rec:
+        recording.log_series(rec, "registration", "stats/registered_images", registrations)
+        _log_model(rec, ws, model)
 
 
 def _log_model(rec: Any, ws: Workspace, model: pycolmap.Reconstruction) -> None:
@@ -678,14 +744,13 @@ STEPS = (
 
 def run_sfm(ws: Workspace, config: SfMConfig, *, overwrite: bool = False) -> SfMSummary:
     """All SfM steps in order; each resumes from what the workspace already holds."""
-    # Importing rerun takes ~0.3 s of pure Python; do it while COLMAP extracts features (which
-    # releases the GIL) rather than before. Logging functions import the module when needed.
-    threading.Thread(target=importlib.import_module, args=("recon.recording",), daemon=True).start()
+    recordings = DeferredRecordings()
     steps: dict[str, StepRecord] = {}
     reused = []
     for name, step in STEPS:
         before = ws.step(name)
-        steps[name] = step(ws, config, overwrite=overwrite)
+        steps[name] = step(ws, config, overwrite=overwrite, recordings=recordings)
         if before is not None and before == steps[name]:
             reused.append(name)
+    recordings.finish()
     return SfMSummary(ws.root, steps, tuple(reused))
