@@ -16,6 +16,7 @@ from plugins.protocols import (
     IntrinsicsContext,
     IntrinsicsResult,
     MeshBackend,
+    Plugin,
 )
 from plugins.registry import KINDS, PluginError, PluginInfo, available, create, list_plugins
 
@@ -30,6 +31,7 @@ __all__ = [
     "IntrinsicsContext",
     "IntrinsicsResult",
     "MeshBackend",
+    "Plugin",
     "PluginError",
     "PluginInfo",
     "available",

@@ -20,6 +20,19 @@ from pathlib import Path
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
 
+class Plugin:
+    """Optional base class of plugins: keeps the parsed ``Options`` as ``self.options``.
+
+    A plugin without options declares an empty ``Options`` dataclass.
+    """
+
+    Options: ClassVar[type]
+    description: ClassVar[str]
+
+    def __init__(self, options: Any) -> None:
+        self.options = options
+
+
 @dataclass(frozen=True, kw_only=True)
 class CameraInfo:
     """One COLMAP camera of the database and the images that use it."""

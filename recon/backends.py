@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pycolmap
 
-from plugins.protocols import DenseContext, DenseResult
+from plugins.protocols import DenseContext, DenseResult, Plugin
 from recon.errors import UserError
 from recon.progress import bar
 
@@ -44,7 +44,7 @@ def load_views(undistorted_dir: Path) -> list[Any]:
     return views
 
 
-class CpuStereoBackend:
+class CpuStereoBackend(Plugin):
     description = ("rectified stereo on the CPU: neighbour pairs, OpenCV SGBM with a left-right "
                    "check, multi-view depth consistency, fused with normals")
 
@@ -59,9 +59,6 @@ class CpuStereoBackend:
                                  "agree with a point (lowered when there are too few views)"})
         rel_depth_tol: float = field(
             default=0.01, metadata={"help": "relative depth agreement between views"})
-
-    def __init__(self, options: Options):
-        self.options = options
 
     def densify(self, context: DenseContext) -> DenseResult:
         from recon.dense.fusion import FusionConfig, filter_consistent, fuse
@@ -99,15 +96,12 @@ class CpuStereoBackend:
         })
 
 
-class ColmapPatchMatchBackend:
+class ColmapPatchMatchBackend(Plugin):
     description = "COLMAP's PatchMatch stereo and fusion (needs pycolmap built with CUDA)"
 
     @dataclass(frozen=True, kw_only=True)
     class Options:
         pass
-
-    def __init__(self, options: Options):
-        self.options = options
 
     def densify(self, context: DenseContext) -> DenseResult:
         import open3d as o3d
@@ -124,7 +118,7 @@ class ColmapPatchMatchBackend:
         return DenseResult(cloud=cloud)  # pragma: no cover
 
 
-class PoissonBackend:
+class PoissonBackend(Plugin):
     description = "screened Poisson surface (Open3D), trimmed where the cloud gives no support"
 
     @dataclass(frozen=True, kw_only=True)
@@ -138,9 +132,6 @@ class PoissonBackend:
                                     "density (low support); keep it small, it can open holes "
                                     "in closed surfaces"})
 
-    def __init__(self, options: Options):
-        self.options = options
-
     def mesh(self, cloud: Any) -> Any:
         from recon.meshing import PoissonConfig, poisson_mesh
 
@@ -149,15 +140,12 @@ class PoissonBackend:
             density_quantile=self.options.density_quantile))
 
 
-class BallPivotingBackend:
+class BallPivotingBackend(Plugin):
     description = "ball pivoting (Open3D): interpolates the points, no hole filling"
 
     @dataclass(frozen=True, kw_only=True)
     class Options:
         pass
-
-    def __init__(self, options: Options):
-        self.options = options
 
     def mesh(self, cloud: Any) -> Any:
         from recon.meshing import BallPivotingConfig, ball_pivoting_mesh

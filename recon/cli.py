@@ -26,8 +26,9 @@ _EPILOG = """examples:
 def _cmd_init(args: argparse.Namespace) -> None:
     from recon.workspace import Workspace
 
-    ws, notes = Workspace.create(args.workspace, args.images, copy=args.copy,
-                                 overwrite=args.overwrite)
+    ws, notes = Workspace.create(
+        args.workspace, args.images, copy=args.copy, overwrite=args.overwrite
+    )
     for note in notes:
         print(f"note: {note}", file=sys.stderr)
     print(f"workspace {ws.root}: {len(ws.image_names())} images in {ws.images_dir}")
@@ -54,8 +55,10 @@ def _cmd_dense(args: argparse.Namespace) -> None:
 
     ws = Workspace.open(args.workspace)
     record = densify(ws, config_from_args(DenseConfig, args), overwrite=args.overwrite)
-    print(f"dense cloud  {ws.dense_cloud_path}  ({record.summary['points']} points, "
-          f"{record.seconds:.1f} s)")
+    print(
+        f"dense cloud  {ws.dense_cloud_path}  ({record.summary['points']} points, "
+        f"{record.seconds:.1f} s)"
+    )
     for note in record.summary.get("notes", []):
         print(f"note         {note}")
 
@@ -66,8 +69,10 @@ def _cmd_mesh(args: argparse.Namespace) -> None:
 
     ws = Workspace.open(args.workspace)
     record = make_mesh(ws, config_from_args(MeshConfig, args), overwrite=args.overwrite)
-    print(f"mesh         {record.summary['vertices']} vertices, {record.summary['faces']} faces"
-          f" ({record.seconds:.1f} s)")
+    print(
+        f"mesh         {record.summary['vertices']} vertices, {record.summary['faces']} faces"
+        f" ({record.seconds:.1f} s)"
+    )
     for path in mesh_paths(ws).values():
         print(f"             {path}")
 
@@ -86,11 +91,15 @@ def _cmd_run(args: argparse.Namespace) -> None:
     summary = run_sfm(ws, config_from_args(SfMConfig, args), overwrite=args.overwrite)
     print("\n".join(summary.lines()[:-1]))
     dense = densify(ws, config_from_args(DenseConfig, args), overwrite=args.overwrite)
-    print(f"dense       {dense.summary['points']} points ({dense.seconds:.1f} s)  "
-          f"{ws.dense_cloud_path}")
+    print(
+        f"dense       {dense.summary['points']} points ({dense.seconds:.1f} s)  "
+        f"{ws.dense_cloud_path}"
+    )
     mesh = make_mesh(ws, config_from_args(MeshConfig, args), overwrite=args.overwrite)
-    print(f"mesh        {mesh.summary['vertices']} vertices, {mesh.summary['faces']} faces "
-          f"({mesh.seconds:.1f} s)  {mesh_paths(ws)['ply']}")
+    print(
+        f"mesh        {mesh.summary['vertices']} vertices, {mesh.summary['faces']} faces "
+        f"({mesh.seconds:.1f} s)  {mesh_paths(ws)['ply']}"
+    )
     print(f"view        mocap view {ws.root}")
 
 
@@ -108,8 +117,9 @@ def _cmd_view(args: argparse.Namespace) -> None:
     else:
         print("no display here; open the recordings on a machine with one:")
         print("  " + shlex.join(command))
-        print("or serve them to a browser:  " + shlex.join([command[0], "--web-viewer",
-                                                               *command[1:]]))
+        print(
+            "or serve them to a browser:  " + shlex.join([command[0], "--web-viewer", *command[1:]])
+        )
 
 
 def _cmd_plugins(args: argparse.Namespace) -> None:
@@ -132,9 +142,13 @@ def _cmd_demo(args: argparse.Namespace) -> None:
     from recon.sfm import SfMConfig
 
     config = config_from_args(DemoConfig, args)
-    report = run_demo(config, config_from_args(SfMConfig, args),
-                      config_from_args(DenseConfig, args), config_from_args(MeshConfig, args),
-                      overwrite=args.overwrite)
+    report = run_demo(
+        config,
+        config_from_args(SfMConfig, args),
+        config_from_args(DenseConfig, args),
+        config_from_args(MeshConfig, args),
+        overwrite=args.overwrite,
+    )
     print("\n".join(report.lines()))
 
 
@@ -145,8 +159,9 @@ def _cmd_compare(args: argparse.Namespace) -> None:
 
     ws = Workspace.open(args.workspace)
     sfm = config_from_args(SfMConfig, args)
-    comparison = compare_intrinsics(ws, sfm, config_from_args(CompareConfig, args),
-                                    overwrite=args.overwrite)
+    comparison = compare_intrinsics(
+        ws, sfm, config_from_args(CompareConfig, args), overwrite=args.overwrite
+    )
     print("\n".join(comparison.lines()))
 
 
@@ -155,6 +170,28 @@ def _cmd_experiment_kruppa_noise(args: argparse.Namespace) -> None:
 
     report = run_kruppa_noise(config_from_args(KruppaNoiseConfig, args))
     print("\n".join(report.lines()))
+
+
+def _step_command(
+    sub: argparse._SubParsersAction,
+    name: str,
+    *,
+    help: str,
+    description: str,
+    images: bool = False,
+) -> argparse.ArgumentParser:
+    """A subcommand that works on a workspace: WS, optionally --images, and --overwrite."""
+    p = sub.add_parser(name, help=help, description=description)
+    p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder")
+    if images:
+        p.add_argument(
+            "--images",
+            type=Path,
+            metavar="DIR",
+            help="create the workspace from this photo folder first (as `mocap init`)",
+        )
+    p.add_argument("--overwrite", action="store_true", help="recompute every step")
+    return p
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -172,87 +209,114 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=_version())
-    parser.add_argument("-v", "--verbose", action="store_true",
-                        help="show COLMAP's own log lines (hidden unless they are errors)")
+    parser.add_argument(
+        "-v",
+        "--verbose",
+        action="store_true",
+        help="show COLMAP's own log lines (hidden unless they are errors)",
+    )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    p = sub.add_parser("init", help="make a workspace from a folder of photos",
-                       description="Make a workspace: photos are hard-linked (or copied) into "
-                       "WS/images, never modified. Non-image files are skipped.")
+    p = sub.add_parser(
+        "init",
+        help="make a workspace from a folder of photos",
+        description="Make a workspace: photos are hard-linked (or copied) into "
+        "WS/images, never modified. Non-image files are skipped.",
+    )
     p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder to create")
-    p.add_argument("--images", type=Path, required=True, metavar="DIR",
-                   help="folder of photos (searched recursively)")
+    p.add_argument(
+        "--images",
+        type=Path,
+        required=True,
+        metavar="DIR",
+        help="folder of photos (searched recursively)",
+    )
     p.add_argument("--copy", action="store_true", help="copy instead of hard-linking")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace the images of an existing workspace (derived files are removed)")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the images of an existing workspace (derived files are removed)",
+    )
     p.set_defaults(func=_cmd_init)
 
-    p = sub.add_parser("sfm", help="sparse reconstruction: features, matching, mapping, BA",
-                       description="COLMAP structure from motion on the workspace photos. "
-                       "Writes WS/database.db, WS/sparse/0 and WS/logs/*.rrd; finished steps "
-                       "are reused unless their settings change or --overwrite is given.")
-    p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder")
-    p.add_argument("--images", type=Path, metavar="DIR",
-                   help="create the workspace from this photo folder first (as `mocap init`)")
-    p.add_argument("--overwrite", action="store_true", help="recompute every step")
+    p = _step_command(
+        sub,
+        "sfm",
+        images=True,
+        help="sparse reconstruction: features, matching, mapping, BA",
+        description="COLMAP structure from motion on the workspace photos. "
+        "Writes WS/database.db, WS/sparse/0 and WS/logs/*.rrd; finished steps "
+        "are reused unless their settings change or --overwrite is given.",
+    )
     add_config_arguments(p, SfMConfig)
     p.set_defaults(func=_cmd_sfm)
 
-    p = sub.add_parser("dense", help="dense coloured point cloud from the sparse model (CPU)",
-                       description="Undistort the registered photos (downscaled to "
-                       "--dense-max-image-size), run the dense backend (default cpu-stereo: "
-                       "rectified stereo on neighbour pairs, left-right and multi-view depth "
-                       "checks) and fuse into WS/dense/fused.ply, with normals and colours.")
-    p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder")
-    p.add_argument("--overwrite", action="store_true", help="recompute every step")
+    p = _step_command(
+        sub,
+        "dense",
+        help="dense coloured point cloud from the sparse model (CPU)",
+        description="Undistort the registered photos (downscaled to "
+        "--dense-max-image-size), run the dense backend (default cpu-stereo: "
+        "rectified stereo on neighbour pairs, left-right and multi-view depth "
+        "checks) and fuse into WS/dense/fused.ply, with normals and colours.",
+    )
     add_config_arguments(p, DenseConfig)
     p.set_defaults(func=_cmd_dense)
 
-    p = sub.add_parser("mesh", help="coloured mesh from the dense cloud (PLY, OBJ, GLB)",
-                       description="Mesh WS/dense/fused.ply (default: screened Poisson, "
-                       "trimmed to the cloud), clean it with pymeshlab and write "
-                       "WS/mesh/mesh.ply, mesh.obj (Blender) and mesh.glb (web).")
-    p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder")
-    p.add_argument("--overwrite", action="store_true", help="recompute every step")
+    p = _step_command(
+        sub,
+        "mesh",
+        help="coloured mesh from the dense cloud (PLY, OBJ, GLB)",
+        description="Mesh WS/dense/fused.ply (default: screened Poisson, "
+        "trimmed to the cloud), clean it with pymeshlab and write "
+        "WS/mesh/mesh.ply, mesh.obj (Blender) and mesh.glb (web).",
+    )
     add_config_arguments(p, MeshConfig)
     p.set_defaults(func=_cmd_mesh)
 
-    p = sub.add_parser("run", help="photos → sparse model → dense cloud → mesh, in one go",
-                       description="`mocap sfm`, `mocap dense` and `mocap mesh` in a row; "
-                       "each step resumes from what the workspace holds.")
-    p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder")
-    p.add_argument("--images", type=Path, metavar="DIR",
-                   help="create the workspace from this photo folder first (as `mocap init`)")
-    p.add_argument("--overwrite", action="store_true", help="recompute every step")
+    p = _step_command(
+        sub,
+        "run",
+        images=True,
+        help="photos → sparse model → dense cloud → mesh, in one go",
+        description="`mocap sfm`, `mocap dense` and `mocap mesh` in a row; "
+        "each step resumes from what the workspace holds.",
+    )
     add_config_arguments(p, SfMConfig, exclude=("num_threads",))
     add_config_arguments(p, DenseConfig)
     add_config_arguments(p, MeshConfig)
     p.set_defaults(func=_cmd_run)
 
-    p = sub.add_parser("compare", help="every focal initialiser on the same matches, vs truth",
-                       description="Run each intrinsic initialiser (Kruppa, Kruppa + BA, COLMAP "
-                       "default + BA, view-graph calibration, with and without BA, EXIF when "
-                       "present) on the same features and matches, each in WS/compare/<method>, "
-                       "and report focal length, error against --gt, registered images, "
-                       "reprojection error and time. Writes WS/compare/{comparison.json, "
-                       "report.md, pairs.png, errors.png} and WS/logs/compare.rrd.")
-    p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder")
-    p.add_argument("--overwrite", action="store_true", help="recompute every step")
+    p = _step_command(
+        sub,
+        "compare",
+        help="every focal initialiser on the same matches, vs truth",
+        description="Run each intrinsic initialiser (Kruppa, Kruppa + BA, COLMAP "
+        "default + BA, view-graph calibration, with and without BA, EXIF when "
+        "present) on the same features and matches, each in WS/compare/<method>, "
+        "and report focal length, error against --gt, registered images, "
+        "reprojection error and time. Writes WS/compare/{comparison.json, "
+        "report.md, pairs.png, errors.png} and WS/logs/compare.rrd.",
+    )
     add_config_arguments(p, CompareConfig)
-    add_config_arguments(p, SfMConfig, exclude=("intrinsics", "intrinsics_options",
-                                                 "refine_focal"))
+    add_config_arguments(p, SfMConfig, exclude=("intrinsics", "intrinsics_options", "refine_focal"))
     p.set_defaults(func=_cmd_compare)
 
-    p = sub.add_parser("experiment", help="reproduce the thesis' experiments",
-                       description="Reproducible experiments from the thesis, with tables and "
-                       "plots written to --out.")
+    p = sub.add_parser(
+        "experiment",
+        help="reproduce the thesis' experiments",
+        description="Reproducible experiments from the thesis, with tables and "
+        "plots written to --out.",
+    )
     experiments = p.add_subparsers(dest="experiment", required=True, metavar="EXPERIMENT")
     q = experiments.add_parser(
-        "kruppa-noise", help="focal error against image noise on the thesis' synthetic scene",
+        "kruppa-noise",
+        help="focal error against image noise on the thesis' synthetic scene",
         description="Two planar grids of 120 points meeting at 135°, f = 600 px, 640x480; "
         "Gaussian noise on the image points, many trials per level; relative focal error of "
         "the Kruppa estimate against σ, for a tilted (generic) and a coplanar-axes (singular) "
-        "second camera. Writes table.csv, report.md, error_vs_noise.png and results.json.")
+        "second camera. Writes table.csv, report.md, error_vs_noise.png and results.json.",
+    )
     add_config_arguments(q, KruppaNoiseConfig)
     q.set_defaults(func=_cmd_experiment_kruppa_noise)
 
@@ -263,11 +327,14 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("plugins", help="list every registered plugin of every kind")
     p.set_defaults(func=_cmd_plugins)
 
-    p = sub.add_parser("demo", help="run the pipeline on a synthetic scene and score it",
-                       description="Render photos of a synthetic textured room with known "
-                       "cameras, run the whole pipeline on them (sparse model, dense cloud, "
-                       "mesh), and print the recovered focal length, pose errors and mesh "
-                       "accuracy against the truth. No download needed.")
+    p = sub.add_parser(
+        "demo",
+        help="run the pipeline on a synthetic scene and score it",
+        description="Render photos of a synthetic textured room with known "
+        "cameras, run the whole pipeline on them (sparse model, dense cloud, "
+        "mesh), and print the recovered focal length, pose errors and mesh "
+        "accuracy against the truth. No download needed.",
+    )
     add_config_arguments(p, DemoConfig)
     p.add_argument("--overwrite", action="store_true", help="recompute every step")
     add_config_arguments(p, SfMConfig, exclude=("seed", "num_threads"))
@@ -303,8 +370,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"mocap {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"mocap {args.command}: interrupted; finished steps are kept, the unfinished "
-              "one left no output", file=sys.stderr)
+        print(
+            f"mocap {args.command}: interrupted; finished steps are kept, the unfinished "
+            "one left no output",
+            file=sys.stderr,
+        )
         return 130
     return 0
 

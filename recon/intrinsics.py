@@ -9,12 +9,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from plugins.protocols import FocalPrior, IntrinsicsContext, IntrinsicsResult
+from plugins.protocols import FocalPrior, IntrinsicsContext, IntrinsicsResult, Plugin
 from recon.errors import UserError
 from recon.images import exif_focal_px
 
 
-class ColmapDefaultInitialiser:
+class ColmapDefaultInitialiser(Plugin):
     """COLMAP's behaviour: no prior, start from 1.2·max(w, h), refine in bundle adjustment."""
 
     description = "COLMAP's default: start from 1.2·max(w, h) px, refined by bundle adjustment"
@@ -22,9 +22,6 @@ class ColmapDefaultInitialiser:
     @dataclass(frozen=True, kw_only=True)
     class Options:
         pass
-
-    def __init__(self, options: Options):
-        self.options = options
 
     def initialise(self, context: IntrinsicsContext) -> IntrinsicsResult:
         return IntrinsicsResult(
@@ -36,7 +33,7 @@ class ColmapDefaultInitialiser:
         )
 
 
-class ExifInitialiser:
+class ExifInitialiser(Plugin):
     """Focal from EXIF: focal length with the focal-plane resolution, or the 35 mm equivalent."""
 
     description = "focal from EXIF (focal length and sensor resolution, or 35 mm equivalent)"
@@ -46,9 +43,6 @@ class ExifInitialiser:
         refine: bool = field(
             default=True, metadata={"help": "let bundle adjustment refine the EXIF focal"}
         )
-
-    def __init__(self, options: Options):
-        self.options = options
 
     def initialise(self, context: IntrinsicsContext) -> IntrinsicsResult:
         priors = []
@@ -71,7 +65,7 @@ class ExifInitialiser:
         return IntrinsicsResult(priors=tuple(priors), refine_focal=self.options.refine)
 
 
-class FixedInitialiser:
+class FixedInitialiser(Plugin):
     """A focal length the user knows, in pixels, for every camera."""
 
     description = "a focal length you give in pixels (-O focal_px=...), held fixed by default"
@@ -86,9 +80,6 @@ class FixedInitialiser:
         def __post_init__(self) -> None:
             if not self.focal_px > 0:
                 raise ValueError(f"focal_px must be positive, got {self.focal_px}")
-
-    def __init__(self, options: Options):
-        self.options = options
 
     def initialise(self, context: IntrinsicsContext) -> IntrinsicsResult:
         return IntrinsicsResult(

@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 import pycolmap
 
-from plugins.protocols import FocalPrior, IntrinsicsContext, IntrinsicsResult
+from plugins.protocols import FocalPrior, IntrinsicsContext, IntrinsicsResult, Plugin
 from recon.calibration.fusion import (
     FocalEstimate,
     FusionConfig,
@@ -102,7 +102,7 @@ def read_pair_geometries(
     return sorted(rows, key=lambda r: (r.image_i, r.image_j))
 
 
-class KruppaInitialiser:
+class KruppaInitialiser(Plugin):
     description = (
         "closed-form focal from each pair's F (degenerated Kruppa equations, thesis ch. 4), "
         "fused robustly over pairs"
@@ -134,9 +134,6 @@ class KruppaInitialiser:
                 "too few pairs, or pairs that disagree) instead of falling back"
             },
         )
-
-    def __init__(self, options: Options):
-        self.options = options
 
     def initialise(self, context: IntrinsicsContext) -> IntrinsicsResult:
         refit = self.options.fundamental is FundamentalSource.REFIT

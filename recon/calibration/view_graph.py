@@ -15,10 +15,10 @@ from pathlib import Path
 
 import pycolmap
 
-from plugins.protocols import FocalPrior, IntrinsicsContext, IntrinsicsResult
+from plugins.protocols import FocalPrior, IntrinsicsContext, IntrinsicsResult, Plugin
 
 
-class ViewGraphInitialiser:
+class ViewGraphInitialiser(Plugin):
     description = "COLMAP's calibrate_view_graph: focal lengths fitted to all F's (on a copy)"
 
     @dataclass(frozen=True, kw_only=True)
@@ -27,9 +27,6 @@ class ViewGraphInitialiser:
             default=True, metadata={"help": "let bundle adjustment refine the calibrated focal"}
         )
         seed: int = field(default=0, metadata={"help": "random seed of the robust fit"})
-
-    def __init__(self, options: Options):
-        self.options = options
 
     def initialise(self, context: IntrinsicsContext) -> IntrinsicsResult:
         focal, ok = calibrate_view_graph_copy(context.database_path, seed=self.options.seed)
