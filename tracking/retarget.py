@@ -1,0 +1,297 @@
+"""Retarget BVH motion capture (CMU skeleton) onto our 24-parameter body model (`tracking.body`).
+
+Two steps:
+
+1. `shape_from_motion` measures the subject: bone lengths of the BVH skeleton (medians over the
+   frames, so one bad frame cannot bias them) become the `BodyShape` lengths; the height is the
+   sole-to-head-top chain of those lengths (so `BodyShape`'s own consistency check holds by
+   construction); girths are `BodyShape.default(height)`'s, i.e. scaled with the height.
+2. `fit_pose` finds, per frame, the in-limits pose whose node positions are closest (least
+   squares, `scipy.optimize.least_squares` with the joint limits as bounds) to the positions of
+   the corresponding BVH joints; `retarget` runs it over the frames, warm-starting every frame
+   from the previous one. Residuals are RMS distances over the fitted nodes, in metres.
+
+Correspondence (`CMU_TO_BODY`; "A+B" means the midpoint of joints A and B):
+
+* pelvis     LeftUpLeg+RightUpLeg  our pelvis joint is defined as the midpoint of the hip joints;
+                                   the CMU root (Hips, = LowerBack) sits ~10 cm above that.
+* spine      Spine                 the waist joint; LowerBack coincides with Hips (zero offset),
+                                   so Spine (top of the lower back bone) is the first waist point.
+* neck       Neck1                 our neck sits on the shoulder line (the shoulders hang off the
+                                   chest at the neck's height). CMU Neck (= top of Spine1) lies
+                                   ~7 cm below the shoulder joints, Neck1 ~3 cm above; Neck1 also
+                                   gives the head nod its proper pivot.
+* head_top   Head_end              when the End Site has zero length (as in the CMU clips
+                                   converted to BVH, which lost the head bone), the head top is
+                                   extrapolated from Head along Neck1->Head by that bone's length
+                                   (`_HEAD_EXTENSION`); see `cmu_node_positions`.
+* l/r_shoulder  Left/RightArm      glenohumeral joint (Left/RightShoulder are clavicle roots).
+* l/r_elbow     Left/RightForeArm
+* l/r_wrist     Left/RightHand
+* l/r_hip       Left/RightUpLeg    (L/RHipJoint coincide with Hips)
+* l/r_knee      Left/RightLeg
+* l/r_ankle     Left/RightFoot
+
+Known model limits: our spine only flexes forward/backward (no lateral bend or twist of the
+chest), the neck only nods, and the shoulders are rigid on the chest (no clavicle), so torso
+twist and shoulder shrug during gait show up as residuals of a few centimetres.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from tracking.body import (
+    LOWER_LIMITS,
+    NODE_INDEX,
+    NODE_NAMES,
+    PARAM_INDEX,
+    UPPER_LIMITS,
+    BodyShape,
+    Pose,
+    forward_kinematics,
+)
+from tracking.bvh import Motion
+from tracking.bvh import forward_kinematics as bvh_forward_kinematics
+
+CMU_TO_BODY: dict[str, str] = {
+    "pelvis": "LeftUpLeg+RightUpLeg",
+    "spine": "Spine",
+    "neck": "Neck1",
+    "head_top": "Head_end",
+    "l_shoulder": "LeftArm",
+    "r_shoulder": "RightArm",
+    "l_elbow": "LeftForeArm",
+    "r_elbow": "RightForeArm",
+    "l_wrist": "LeftHand",
+    "r_wrist": "RightHand",
+    "l_hip": "LeftUpLeg",
+    "r_hip": "RightUpLeg",
+    "l_knee": "LeftLeg",
+    "r_knee": "RightLeg",
+    "l_ankle": "LeftFoot",
+    "r_ankle": "RightFoot",
+}
+# Head top = Head + _HEAD_EXTENSION * (Head - Neck1) when Head_end has a zero-length offset.
+_HEAD_EXTENSION: float = 1.0
+_GIRTHS: tuple[str, ...] = (
+    "pelvis_half_width", "trunk_half_depth", "chest_half_width", "head_half_width",
+    "upper_arm_radius", "forearm_radius", "thigh_radius", "shank_radius",
+)  # fmt: skip
+_ROOT_ROT = [PARAM_INDEX[n] for n in ("root_rz", "root_rx", "root_ry")]
+_ROOT_TRANS = [PARAM_INDEX[n] for n in ("root_tx", "root_ty", "root_tz")]
+
+
+def cmu_node_positions(motion: Motion, metres_per_unit: float) -> dict[str, np.ndarray]:
+    """Node name -> (F, 3) world positions in metres of the CMU points of `CMU_TO_BODY`."""
+    pos = np.asarray(bvh_forward_kinematics(motion, scale=metres_per_unit))
+    names = motion.joint_names
+
+    def joint(name: str) -> np.ndarray:
+        if name == "Head_end":
+            end = motion.joints[motion.joint_index(name)]
+            if np.linalg.norm(end.offset) == 0.0:
+                head, neck1 = pos[:, names.index("Head")], pos[:, names.index("Neck1")]
+                return head + _HEAD_EXTENSION * (head - neck1)
+        return pos[:, names.index(name)]
+
+    out = {}
+    for node, spec in CMU_TO_BODY.items():
+        parts = spec.split("+")
+        out[node] = np.mean([joint(p) for p in parts], axis=0)
+    return out
+
+
+def _median_distance(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.median(np.linalg.norm(a - b, axis=-1)))
+
+
+def shape_from_motion(motion: Motion, metres_per_unit: float, frame: int | None = 0) -> BodyShape:
+    """The subject's `BodyShape` measured from the BVH skeleton (lengths in metres).
+
+    Bone lengths are medians over all frames (rigid bones make them the rest lengths; the
+    median ignores glitches). `frame` is kept for API compatibility: lengths do not depend on it.
+    Left and right are averaged (our model is symmetric). The ankle height is the lowest ankle
+    height over the clip above the lowest toe tip (the floor); the foot length is the ankle to
+    toe-tip distance over 0.8 (our foot mesh puts the toe tip 0.8 foot lengths ahead of the
+    ankle). The hand length (the CMU hand bones end at the finger bases) and all girths are the
+    standard proportions of the resulting height.
+    """
+    del frame
+    p = cmu_node_positions(motion, metres_per_unit)
+    pos = np.asarray(bvh_forward_kinematics(motion, scale=metres_per_unit))
+    names = motion.joint_names
+
+    def both(a: str, b: str) -> float:
+        return 0.5 * (_median_distance(p["l_" + a], p["l_" + b])
+                      + _median_distance(p["r_" + a], p["r_" + b]))  # fmt: skip
+
+    floor = min(pos[:, names.index(f"{s}ToeBase_end"), 1].min() for s in ("Left", "Right"))
+    ankle_height = float(min(p["l_ankle"][:, 1].min(), p["r_ankle"][:, 1].min()) - floor)
+    toe = 0.5 * sum(
+        _median_distance(pos[:, names.index(f"{s}Foot")], pos[:, names.index(f"{s}ToeBase_end")])
+        for s in ("Left", "Right")
+    )
+    lengths = {
+        "pelvis_to_spine": _median_distance(p["pelvis"], p["spine"]),
+        "spine_to_neck": _median_distance(p["spine"], p["neck"]),
+        "neck_to_head_top": _median_distance(p["neck"], p["head_top"]),
+        "shoulder_half_width": 0.5 * _median_distance(p["l_shoulder"], p["r_shoulder"]),
+        "hip_half_width": 0.5 * _median_distance(p["l_hip"], p["r_hip"]),
+        "upper_arm": both("shoulder", "elbow"),
+        "forearm": both("elbow", "wrist"),
+        "thigh": both("hip", "knee"),
+        "shank": both("knee", "ankle"),
+        "ankle_height": max(ankle_height, 0.01),
+        "foot_length": toe / 0.8,
+    }
+    height = (lengths["thigh"] + lengths["shank"] + lengths["ankle_height"]
+              + lengths["pelvis_to_spine"] + lengths["spine_to_neck"]
+              + lengths["neck_to_head_top"])  # fmt: skip
+    default = BodyShape.default(height)
+    values = {f.name: getattr(default, f.name) for f in fields(BodyShape)}
+    values.update(lengths)
+    values["height"] = height
+    return BodyShape(**values)
+
+
+# ---------------------------------------------------------------------------------------------
+# Pose fitting
+# ---------------------------------------------------------------------------------------------
+
+
+def _zxy_angles(r: np.ndarray) -> np.ndarray:
+    """(rz, rx, ry) with r = Rz(rz) @ Rx(rx) @ Ry(ry)."""
+    rx = np.arcsin(np.clip(r[2, 1], -1.0, 1.0))
+    rz = np.arctan2(-r[0, 1], r[1, 1])
+    ry = np.arctan2(-r[2, 0], r[2, 2])
+    return np.array([rz, rx, ry])
+
+
+def _root_from_targets(targets: Mapping[str, np.ndarray], shape: BodyShape) -> np.ndarray | None:
+    """Root (tx, ty, tz, rz, rx, ry) aligning the pelvis-frame nodes to targets (Kabsch)."""
+    local = {
+        "pelvis": (0.0, 0.0, 0.0),
+        "l_hip": (shape.hip_half_width, 0.0, 0.0),
+        "r_hip": (-shape.hip_half_width, 0.0, 0.0),
+        "spine": (0.0, shape.pelvis_to_spine, 0.0),
+    }
+    have = [n for n in local if n in targets]
+    if len(have) < 3:
+        return None
+    a = np.array([local[n] for n in have])
+    b = np.array([targets[n] for n in have], dtype=float)
+    ca, cb = a.mean(0), b.mean(0)
+    u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
+    d = np.sign(np.linalg.det(vt.T @ u.T))
+    r = vt.T @ np.diag([1.0, 1.0, d]) @ u.T  # world_from_pelvis
+    return np.concatenate([cb - r @ ca, _zxy_angles(r)])
+
+
+def _residual_fn(names: Sequence[str], target: np.ndarray, shape: BodyShape):
+    idx = np.array([NODE_INDEX[n] for n in names])
+
+    def fun(x: np.ndarray) -> np.ndarray:
+        world = forward_kinematics(Pose(x), shape)
+        return (world[idx, :3, 3] - target).ravel()
+
+    return fun
+
+
+def _solve(fun, x0: np.ndarray) -> tuple[np.ndarray, float]:
+    x0 = np.clip(x0, LOWER_LIMITS, UPPER_LIMITS)
+    sol = least_squares(fun, x0, bounds=(LOWER_LIMITS, UPPER_LIMITS), method="trf",
+                        x_scale=1.0, xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=400)  # fmt: skip
+    x = np.clip(sol.x, LOWER_LIMITS, UPPER_LIMITS)
+    return x, float(np.sqrt(np.mean(np.sum(fun(x).reshape(-1, 3) ** 2, axis=1))))
+
+
+def fit_pose(
+    targets: Mapping[str, np.ndarray],
+    shape: BodyShape,
+    init: Pose | None = None,
+    restarts: int = 6,
+    seed: int = 0,
+) -> tuple[Pose, float]:
+    """Least-squares pose whose nodes best match `targets` (node name -> (3,) world, metres).
+
+    Returns the pose (always within the joint limits) and the RMS node distance in metres.
+    The root translation and rotation are always initialised from the pelvis, hips and spine
+    targets (Kabsch), which avoids the +-180 degree wrap of the root angles; the limbs start
+    from `init` (warm start) or, without one, from neutral plus `restarts` random in-limits
+    starts, keeping the best (a cold start can fall into a local minimum, e.g. a limb bent the
+    wrong way round).
+    """
+    names = [n for n in NODE_NAMES if n in targets]
+    unknown = sorted(set(targets) - set(NODE_NAMES))
+    if unknown:
+        raise KeyError(f"unknown nodes {unknown}")
+    if not names:
+        raise ValueError("no targets")
+    target = np.array([np.asarray(targets[n], dtype=float).reshape(3) for n in names])
+    fun = _residual_fn(names, target, shape)
+    x0 = init.params.copy() if init is not None else Pose.neutral().params.copy()
+    root = _root_from_targets(targets, shape)
+    if root is not None:
+        x0[_ROOT_TRANS + _ROOT_ROT] = root
+    elif "pelvis" in targets and init is None:
+        x0[_ROOT_TRANS] = targets["pelvis"]
+    best_x, best_rms = _solve(fun, x0)
+    if init is None:
+        rng = np.random.default_rng(seed)
+        lo = np.where(np.isfinite(LOWER_LIMITS), LOWER_LIMITS, 0.0)
+        hi = np.where(np.isfinite(UPPER_LIMITS), UPPER_LIMITS, 0.0)
+        fixed = _ROOT_TRANS + _ROOT_ROT
+        for _ in range(restarts):
+            if best_rms < 1e-5:
+                break
+            x = rng.uniform(lo, hi)
+            x[fixed] = x0[fixed]
+            x, rms = _solve(fun, x)
+            if rms < best_rms:
+                best_x, best_rms = x, rms
+    return Pose(best_x), best_rms
+
+
+@dataclass(frozen=True)
+class RetargetResult:
+    """Per-frame poses of our model following a BVH clip.
+
+    frames: (F,) indices into the clip; residual_rms_m: (F,) RMS node distance per frame.
+    """
+
+    shape: BodyShape
+    frames: np.ndarray
+    poses: list[Pose]
+    residual_rms_m: np.ndarray
+
+    @property
+    def summary(self) -> dict[str, float]:
+        r = self.residual_rms_m * 1000.0
+        return {
+            "frames": float(len(r)),
+            "mean_residual_mm": float(r.mean()) if len(r) else float("nan"),
+            "max_residual_mm": float(r.max()) if len(r) else float("nan"),
+            "height_m": self.shape.height,
+        }
+
+
+def retarget(
+    motion: Motion, metres_per_unit: float, frames: Sequence[int] | None = None
+) -> RetargetResult:
+    """Fit our model to every frame in `frames` (default all), warm-starting from the previous
+    fitted frame (cold start for the first)."""
+    shape = shape_from_motion(motion, metres_per_unit)
+    pos = cmu_node_positions(motion, metres_per_unit)
+    idx = np.arange(motion.num_frames) if frames is None else np.asarray(list(frames), int)
+    poses: list[Pose] = []
+    rms = np.empty(len(idx))
+    prev: Pose | None = None
+    for k, f in enumerate(idx):
+        prev, rms[k] = fit_pose({n: p[f] for n, p in pos.items()}, shape, prev)
+        poses.append(prev)
+    return RetargetResult(shape, idx, poses, rms)
