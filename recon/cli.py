@@ -103,6 +103,16 @@ def _cmd_run(args: argparse.Namespace) -> None:
     print(f"view        mocap view {ws.root}")
 
 
+def _cmd_body(args: argparse.Namespace) -> None:
+    from tracking.export import BodyExportConfig, export_body
+
+    out = export_body(config_from_args(BodyExportConfig, args))
+    print(f"body mesh  {out['mesh']}  ({out['vertices']} vertices, {out['faces']} faces)")
+    print(f"joints     {out['joints']}")
+    print(f"fit        {out['residual_mm']:.1f} mm RMS over the joints; "
+          f"subject height {out['height_m']:.2f} m")
+
+
 def _cmd_view(args: argparse.Namespace) -> None:
     from recon.recording import open_viewer
     from recon.workspace import Workspace
@@ -200,6 +210,7 @@ def build_parser() -> argparse.ArgumentParser:
     from recon.demo import DemoConfig
     from recon.mvs import DenseConfig, MeshConfig
     from recon.sfm import SfMConfig
+    from tracking.export import BodyExportConfig
 
     parser = argparse.ArgumentParser(
         prog="mocap",
@@ -319,6 +330,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_config_arguments(q, KruppaNoiseConfig)
     q.set_defaults(func=_cmd_experiment_kruppa_noise)
+
+    p = sub.add_parser(
+        "body",
+        help="posed body mesh and joints of one BVH frame",
+        description="Retarget frame K of a BVH clip onto the articulated body model (bone "
+        "lengths give the shape, least squares the 24 pose parameters) and write "
+        "OUT/body.ply (metres, Y up, in the BVH's world) and OUT/joints.json.",
+    )
+    add_config_arguments(p, BodyExportConfig)
+    p.set_defaults(func=_cmd_body)
 
     p = sub.add_parser("view", help="open the workspace's recordings in the Rerun viewer")
     p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder")
