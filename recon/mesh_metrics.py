@@ -16,7 +16,6 @@ first, so the precision does not depend on where in the world the model is.
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,6 +23,8 @@ import cv2
 import numpy as np
 import open3d as o3d
 from scipy.spatial import cKDTree
+
+from recon.workspace import atomic_output
 
 Surface = o3d.geometry.TriangleMesh | np.ndarray
 """A triangle mesh, or an (N, 3) array of points, in the frame of the comparison."""
@@ -347,12 +348,7 @@ def render_mesh_png(
         raise ValueError(f"render_mesh_png: {path} must end in .png")
     rendering = render_mesh(mesh, width=width, height=height, view=view, camera=camera)
     path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_name(f"{path.stem}.partial{path.suffix}")  # cv2 wants the real suffix
-    try:
+    with atomic_output(path) as partial:
         if not cv2.imwrite(str(partial), cv2.cvtColor(rendering.image_rgb, cv2.COLOR_RGB2BGR)):
             raise OSError(f"OpenCV could not write {partial}")
-        os.replace(partial, path)
-    except BaseException:
-        partial.unlink(missing_ok=True)
-        raise
     return path

@@ -57,6 +57,7 @@ import pymeshlab
 from scipy.spatial import cKDTree
 
 from recon.errors import UserError
+from recon.workspace import partial_path
 
 MIN_POINTS = 100
 """Fewest points a cloud must have to be meshed."""
@@ -519,11 +520,6 @@ _WRITERS: dict[str, Callable[[Path, o3d.geometry.TriangleMesh], None]] = {
 }
 
 
-def _partial_path(path: Path) -> Path:
-    """``mesh.ply`` → ``mesh.partial.ply``: the writers pick the format from the extension."""
-    return path.with_name(f"{path.stem}.partial{path.suffix}")
-
-
 def write_mesh(
     mesh: o3d.geometry.TriangleMesh, path_ply: Path, *, also: Sequence[str] = (".obj", ".glb")
 ) -> list[Path]:
@@ -545,7 +541,7 @@ def write_mesh(
     if len(mesh.triangles) == 0:
         raise MeshingError(f"write_mesh: the mesh for {path_ply} has no faces")
     targets = [path_ply.with_suffix(s) for s in dict.fromkeys(suffixes)]
-    partials = [_partial_path(t) for t in targets]
+    partials = [partial_path(t) for t in targets]
     path_ply.parent.mkdir(parents=True, exist_ok=True)
     try:
         for target, partial in zip(targets, partials, strict=True):

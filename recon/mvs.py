@@ -14,7 +14,6 @@ fingerprint matches, and writes atomically.
 
 from __future__ import annotations
 
-import shutil
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -120,11 +119,8 @@ def densify(ws: Workspace, config: DenseConfig, *, overwrite: bool = False) -> S
         if len(cloud.points) == 0:
             raise UserError(f"dense backend {config.dense} found no 3D points in {ws.root}")
         with atomic_output(ws.dense_cloud_path) as partial:
-            # Open3D picks the format from the extension, so keep ".ply" at the end.
-            target = partial.with_name("fused.partial.ply")
-            if not o3d.io.write_point_cloud(str(target), cloud, write_ascii=False):
+            if not o3d.io.write_point_cloud(str(partial), cloud, write_ascii=False):
                 raise UserError(f"could not write {ws.dense_cloud_path}")
-            shutil.move(target, partial)
         _log_dense(ws, cloud)
     return ws.record_step(
         "dense", fp, config=settings, seconds=timer.seconds,

@@ -64,8 +64,14 @@ def fingerprint(*parts: Any) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+def partial_path(target: Path) -> Path:
+    """Temporary sibling of ``target`` that keeps its extension (``mesh.partial.ply``), so that
+    writers choosing the format by extension (Open3D, OpenCV, matplotlib) work on it."""
+    return target.with_name(f"{target.stem}.partial{target.suffix}")
+
+
 def write_json_atomic(path: Path, data: Any) -> None:
-    tmp = path.with_name(path.name + ".partial")
+    tmp = partial_path(path)
     tmp.write_text(json.dumps(data, indent=2, default=str) + "\n")
     os.replace(tmp, path)
 
@@ -84,7 +90,7 @@ def atomic_output(target: Path, *, seed_from: Path | None = None) -> Iterator[Pa
     ``seed_from`` copies an existing file first, for steps that update a file in place (the
     COLMAP database). On failure the temporary path is removed and ``target`` is untouched.
     """
-    tmp = target.with_name(target.name + ".partial")
+    tmp = partial_path(target)
     _remove(tmp)
     if seed_from is not None:
         shutil.copy2(seed_from, tmp)

@@ -51,11 +51,8 @@ def export_body(config: BodyExportConfig) -> dict[str, Any]:
     config.out.mkdir(parents=True, exist_ok=True)
     ply = config.out / "body.ply"
     with atomic_output(ply) as partial:
-        # Open3D picks the format from the extension: keep ".ply" last.
-        target = partial.with_name("body.partial.ply")
-        if not o3d.io.write_triangle_mesh(str(target), mesh, write_ascii=False):
+        if not o3d.io.write_triangle_mesh(str(partial), mesh, write_ascii=False):
             raise UserError(f"could not write {ply}")
-        target.replace(partial)
     joints = {name: [float(v) for v in xyz]
               for name, xyz in node_positions_in_world(pose, result.shape).items()}
     write_json_atomic(config.out / "joints.json", joints)

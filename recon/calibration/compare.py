@@ -14,7 +14,6 @@ each branch is an ordinary workspace that COLMAP or `mocap view` can open. Outpu
 from __future__ import annotations
 
 import math
-import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -29,7 +28,7 @@ from recon.sfm import (
     map_sparse,
     match_features,
 )
-from recon.workspace import Workspace, write_json_atomic
+from recon.workspace import Workspace, atomic_output, write_json_atomic
 
 
 @dataclass(frozen=True)
@@ -254,9 +253,8 @@ def _write_report(path: Path, ws: Workspace, c: Comparison, outputs: dict[str, P
             focal = "" if p["focal_px"] is None else f"{p['focal_px']:.1f}"
             lines.append(f"| {p['image_i']} | {p['image_j']} | {focal} | {p['status']} | "
                          f"{p.get('conditioning', math.nan):.3g} | {p.get('inliers', '')} |")
-    tmp = path.with_name(path.name + ".partial")
-    tmp.write_text("\n".join(lines) + "\n")
-    shutil.move(tmp, path)
+    with atomic_output(path) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
 
 
 def _log(ws: Workspace, c: Comparison) -> Path:

@@ -63,8 +63,10 @@ def test_thesis_front_end_with_kruppa_on_the_demo_scene(tmp_path):
     from recon.demo import DemoConfig, run_demo
     from recon.sfm import FrontEnd, Matcher, SfMConfig
 
+    # One thread and a fixed seed: COLMAP's multi-threaded RANSAC varies run to run, and this
+    # test once failed under load (full suite) while passing alone.
     config = SfMConfig(front_end=FrontEnd.HARRIS_NCC, matcher=Matcher.SEQUENTIAL,
-                       sequential_overlap=2, intrinsics="kruppa")
+                       sequential_overlap=2, intrinsics="kruppa", num_threads=1, seed=0)
     report = run_demo(DemoConfig(out=tmp_path / "demo", num_views=8, mesh=False), config)
     assert report.sfm.steps["features"].config["front_end"] == "harris-ncc"
     assert report.sfm.steps["matches"].summary["verified_pairs"] >= 6
