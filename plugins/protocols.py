@@ -129,3 +129,17 @@ class MeshBackend(Protocol):
     def mesh(self, cloud: Any) -> Any:
         """``open3d.geometry.PointCloud`` in, ``open3d.geometry.TriangleMesh`` out."""
         ...
+
+
+@runtime_checkable
+class SilhouetteRenderer(Protocol):
+    """Draws the silhouette of a closed triangle mesh as one calibrated camera sees it."""
+
+    Options: ClassVar[type]
+    description: ClassVar[str]
+
+    def render(self, vertices_in_world: Any, faces: Any, camera: Any) -> Any:
+        """vertices (V, 3) float in metres, faces (F, 3) int, ``camera`` a
+        ``tracking.cameras.Camera`` (typed Any: plugins must not import tracking) ->
+        (camera.height, camera.width) bool mask, True where the pixel centre sees the mesh."""
+        ...

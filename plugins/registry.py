@@ -14,7 +14,7 @@ from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
 from plugins.options import OptionsError, describe_options, parse_options
-from plugins.protocols import DenseBackend, IntrinsicInitialiser, MeshBackend
+from plugins.protocols import DenseBackend, IntrinsicInitialiser, MeshBackend, SilhouetteRenderer
 
 
 class PluginError(Exception):
@@ -61,6 +61,15 @@ KINDS: dict[str, PluginKind] = {
         summary="mesh backends: oriented point cloud → triangle mesh with vertex colours",
         choose_flag="--mesher",
         option_flag="--mesh-option",
+    ),
+    "renderer": PluginKind(
+        name="renderer",
+        group="mocap.renderer",
+        protocol=SilhouetteRenderer,
+        method="render",
+        summary="silhouette renderers: posed body mesh + camera → boolean mask",
+        choose_flag="--renderer",
+        option_flag="--renderer-option",
     ),
 }
 

@@ -18,6 +18,8 @@ _EPILOG = """examples:
   mocap sfm ws/temple --intrinsics fixed -O focal_px=1520
   mocap compare ws/temple --gt photos/templeSR_par.txt   focal initialisers vs truth
   mocap experiment kruppa-noise               the thesis' noise experiment, table + plot
+  mocap fit --cloud person.ply --out DIR      fit the body model to a point cloud
+  mocap report --bvh clip.bvh --out DIR       joint angles, COM, joint loads → DIR/report/
   mocap view ws/temple                        open the recordings in the Rerun viewer
   mocap plugins                               list the registered plugins
 """
@@ -175,6 +177,45 @@ def _cmd_compare(args: argparse.Namespace) -> None:
     print("\n".join(comparison.lines()))
 
 
+def _cmd_report(args: argparse.Namespace) -> None:
+    from tracking.report import ReportConfig, report_from_bvh, report_from_workspace
+
+    config = config_from_args(ReportConfig, args)
+    if (args.workspace is None) == (args.bvh is None):
+        raise UserError("give either a workspace (mocap report WS) or --bvh FILE --out DIR")
+    if args.bvh is not None:
+        if args.out is None:
+            raise UserError("--bvh needs --out DIR (the report goes to DIR/report/)")
+        result = report_from_bvh(args.bvh, args.out, config, overwrite=args.overwrite)
+    else:
+        result = report_from_workspace(args.workspace, config, overwrite=args.overwrite)
+    print("\n".join(result.lines()))
+
+
+def _cmd_fit(args: argparse.Namespace) -> None:
+    from recon.workspace import Workspace
+    from tracking.fit import FitConfig
+    from tracking.fit_cloud import FitCloudConfig, SubjectConfig, fit_cloud_file, fit_workspace
+
+    if (args.workspace is None) == (args.cloud is None):
+        raise UserError("give either a workspace (mocap fit WS) or --cloud FILE.ply --out DIR")
+    subject, config = config_from_args(SubjectConfig, args), config_from_args(FitConfig, args)
+    if args.cloud is not None:
+        result, paths = fit_cloud_file(config_from_args(FitCloudConfig, args), subject, config)
+        summary = result.summary()
+    else:
+        ws = Workspace.open(args.workspace)
+        summary, paths = fit_workspace(ws, subject, config, overwrite=args.overwrite)
+    verdict = "fitted" if summary["success"] else "FAILED"
+    print(f"body fit   {verdict}: {summary['message']}; median distance "
+          f"{summary['residual_median']:.4g}, {summary['inlier_fraction']:.0%} inliers, "
+          f"height {summary['height']:.3g}")
+    for path in paths.values():
+        print(f"           {path}")
+    if not summary["success"]:
+        raise UserError("the cloud does not look like one human body (see fit.json)")
+
+
 def _cmd_experiment_kruppa_noise(args: argparse.Namespace) -> None:
     from recon.calibration.experiment import KruppaNoiseConfig, run_kruppa_noise
 
@@ -211,6 +252,9 @@ def build_parser() -> argparse.ArgumentParser:
     from recon.mvs import DenseConfig, MeshConfig
     from recon.sfm import SfMConfig
     from tracking.export import BodyExportConfig
+    from tracking.fit import FitConfig
+    from tracking.fit_cloud import SubjectConfig
+    from tracking.report import ReportConfig
 
     parser = argparse.ArgumentParser(
         prog="mocap",
@@ -340,6 +384,43 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_config_arguments(p, BodyExportConfig)
     p.set_defaults(func=_cmd_body)
+
+    p = sub.add_parser(
+        "fit",
+        help="fit the articulated body model to a human point cloud",
+        description="Estimate the body's height, girth and 24 pose parameters from a point "
+        "cloud: a workspace's dense cloud (mocap fit WS → WS/body/fit.json, fit.ply, "
+        "logs/fit.rrd) or any point cloud in metres (mocap fit --cloud FILE.ply --out DIR → "
+        "DIR/fit.json, fit.ply, fit.rrd). Initialisation is automatic. A cloud that no body "
+        "explains is reported as a failure (exit code 2) with its residual.",
+    )
+    p.add_argument("workspace", type=Path, nargs="?", metavar="WS",
+                   help="workspace with a dense cloud (mocap dense)")
+    p.add_argument("--cloud", type=Path, metavar="FILE", help="fit this point cloud instead")
+    p.add_argument("--out", type=Path, metavar="DIR", default=Path("workspaces/fit"),
+                   help="output folder for --cloud (default: %(default)s)")
+    p.add_argument("--overwrite", action="store_true", help="recompute even if up to date")
+    add_config_arguments(p, SubjectConfig)
+    add_config_arguments(p, FitConfig)
+    p.set_defaults(func=_cmd_fit)
+
+    p = sub.add_parser(
+        "report",
+        help="motion report: joint angles, centre of mass, joint loads (HTML, CSV, TRC)",
+        description="Kinematics and inverse dynamics of a tracked sequence (WS/tracks/pose.json) "
+        "or of a BVH clip (--bvh FILE --out DIR): segment positions, velocities, accelerations "
+        "and orientations, centre of mass, angular velocities and accelerations, ISB joint "
+        "angles, and Newton-Euler joint forces and moments (de Leva 1996 segments), after a "
+        "zero-lag Butterworth low-pass. Writes report/index.html, report/*.csv, "
+        "report/motion.trc and a Rerun recording (WS/logs/report.rrd or DIR/report/report.rrd).",
+    )
+    p.add_argument("workspace", type=Path, nargs="?", metavar="WS",
+                   help="tracking workspace (reads WS/tracks/pose.json)")
+    p.add_argument("--bvh", type=Path, metavar="FILE", help="report this BVH clip instead")
+    p.add_argument("--out", type=Path, metavar="DIR", help="output folder for --bvh")
+    p.add_argument("--overwrite", action="store_true", help="recompute even if up to date")
+    add_config_arguments(p, ReportConfig)
+    p.set_defaults(func=_cmd_report)
 
     p = sub.add_parser("view", help="open the workspace's recordings in the Rerun viewer")
     p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder")

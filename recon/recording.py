@@ -219,6 +219,99 @@ def _fmt(value: object) -> str:
     return f"{value:.4g}" if isinstance(value, float) else str(value)
 
 
+# Motion over frames (tracking.report). Timelines shared with the tracking recording: ``frame``
+# (sequence: the frame number) and ``time`` (duration: frame number / frame rate, seconds).
+FRAME_TIMELINE = "frame"
+TIME_TIMELINE = "time"
+
+
+def _frame_indexes(frames: np.ndarray, times_s: np.ndarray) -> list[rr.TimeColumn]:
+    return [
+        rr.TimeColumn(FRAME_TIMELINE, sequence=np.asarray(frames, dtype=np.int64)),
+        rr.TimeColumn(TIME_TIMELINE, duration=np.asarray(times_s, dtype=float)),
+    ]
+
+
+def log_y_up_world(rec: rr.RecordingStream, entity: str = "world") -> None:
+    """The body model's world: right-handed, Y up, metres (not COLMAP's Y-down model frame)."""
+    rec.log(entity, rr.ViewCoordinates.RIGHT_HAND_Y_UP, static=True)
+
+
+def log_frame_series(
+    rec: rr.RecordingStream, entity: str, frames: np.ndarray, times_s: np.ndarray,
+    values: np.ndarray,
+) -> None:  # fmt: skip
+    """One scalar curve over frames (T,), on the ``frame`` and ``time`` timelines; NaN values
+    (frames without data) are not logged."""
+    values = np.asarray(values, dtype=float)
+    ok = np.isfinite(values)
+    if ok.any():
+        rec.send_columns(entity, indexes=_frame_indexes(frames[ok], times_s[ok]),
+                         columns=rr.Scalars.columns(scalars=values[ok]))
+
+
+def log_skeleton_frames(
+    rec: rr.RecordingStream, entity: str, frames: np.ndarray, times_s: np.ndarray,
+    points_in_world: np.ndarray, bones: Sequence[tuple[int, int]], radius: float = 0.02,
+) -> None:  # fmt: skip
+    """Joint centres (T, N, 3) as ``entity/joints`` and bones (index pairs) as ``entity/bones``,
+    one skeleton per frame on the ``frame`` and ``time`` timelines; frames with NaN skipped."""
+    points = np.asarray(points_in_world, dtype=float)
+    ok = np.isfinite(points).all(axis=(1, 2))
+    if not ok.any():
+        return
+    points = points[ok]
+    indexes = _frame_indexes(frames[ok], times_s[ok])
+    n_frames, n_points = points.shape[:2]
+    rec.send_columns(
+        f"{entity}/joints", indexes=indexes,
+        columns=rr.Points3D.columns(positions=points.reshape(-1, 3),
+                                    radii=np.full(n_frames * n_points, radius, np.float32),
+                                    ).partition([n_points] * n_frames),
+    )  # fmt: skip
+    if bones:
+        pairs = np.asarray(bones, dtype=int)
+        strips = points[:, pairs].reshape(-1, 2, 3)
+        rec.send_columns(
+            f"{entity}/bones", indexes=indexes,
+            columns=rr.LineStrips3D.columns(strips=list(strips)).partition([len(pairs)] * n_frames),
+        )
+
+
+def log_skeleton_context(
+    rec: rr.RecordingStream, entity: str, names: Sequence[str],
+    connections: Sequence[tuple[int, int]], class_id: int = 0, label: str = "body",
+) -> None:  # fmt: skip
+    """The keypoint names and bone connections of a skeleton class, as a static
+    `AnnotationContext` on `entity`: points logged below it with that class id and keypoint ids
+    are drawn labelled and connected (Rerun's human_pose_tracking convention)."""
+    rec.log(
+        entity,
+        rr.AnnotationContext([
+            rr.ClassDescription(
+                info=rr.AnnotationInfo(id=class_id, label=label),
+                keypoint_annotations=[rr.AnnotationInfo(id=i, label=name)
+                                      for i, name in enumerate(names)],
+                keypoint_connections=[(int(a), int(b)) for a, b in connections],
+            )
+        ]),
+        static=True,
+    )  # fmt: skip
+
+
+def log_skeleton(
+    rec: rr.RecordingStream, entity: str, points_in_world: np.ndarray, class_id: int = 0,
+    radius: float = 0.015, static: bool = False,
+) -> None:  # fmt: skip
+    """Joint positions (N, 3) as keypoints 0..N-1 of `class_id` (see `log_skeleton_context`)."""
+    points = np.asarray(points_in_world, dtype=np.float32)
+    rec.log(
+        entity,
+        rr.Points3D(points, radii=radius, class_ids=class_id, keypoint_ids=np.arange(len(points))),
+        static=static,
+    )
+
+
 def viewer_command(recordings: Sequence[Path]) -> list[str]:
     """The command that opens recordings in the Rerun viewer (shipped in the rerun-sdk wheel)."""
     import shutil

@@ -159,6 +159,11 @@ class Workspace:
         return self.root / "mesh"
 
     @property
+    def body_dir(self) -> Path:
+        """The fitted body model (`mocap fit`)."""
+        return self.root / "body"
+
+    @property
     def logs_dir(self) -> Path:
         return self.root / "logs"
 

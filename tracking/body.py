@@ -361,6 +361,47 @@ def forward_kinematics(pose: Pose, shape: BodyShape) -> np.ndarray:
     return world
 
 
+def _subtree_mask() -> np.ndarray:
+    moved = np.zeros((N_POSE_PARAMS, len(NODE_NAMES)), dtype=bool)
+    for k, param in enumerate(POSE_LAYOUT):
+        joint = NODE_INDEX[param.joint]
+        for node in range(len(NODE_NAMES)):
+            ancestor = node
+            while ancestor >= 0 and ancestor != joint:
+                ancestor = NODE_PARENTS[ancestor]
+            moved[k, node] = ancestor == joint
+    moved.flags.writeable = False
+    return moved
+
+
+# PARAM_MOVES_NODE[k, n]: pose parameter k moves node n (n is its joint or a descendant).
+PARAM_MOVES_NODE: np.ndarray = _subtree_mask()
+
+
+def pose_derivative_axes(pose: Pose, shape: BodyShape) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What the derivatives of world points with respect to the pose parameters need.
+
+    Returns world_from_node (16, 4, 4), axis_in_world (24, 3) and pivot_in_world (24, 3): a
+    point w rigidly attached to a node moved by parameter k (`PARAM_MOVES_NODE`) changes at
+    dw/dp_k = axis_k x (w - pivot_k) for a rotation and dw/dp_k = axis_k for a translation
+    (pivot 0); a direction n attached to it changes at axis_k x n (rotations only).
+    """
+    per_param = axis_angle_rotations(_ROT_AXES, pose.params[_ROT_PARAMS])
+    world = forward_kinematics(pose, shape)
+    axes = np.zeros((N_POSE_PARAMS, 3))
+    pivots = np.zeros((N_POSE_PARAMS, 3))
+    axes[_TRANS_PARAMS] = _TRANS_AXES
+    for node, rows in enumerate(_ROT_ROWS_OF_NODE):
+        parent = NODE_PARENTS[node]
+        # Frame in which the node's first rotation acts: the parent's, at the node's origin.
+        frame = world[parent, :3, :3] if parent >= 0 else np.eye(3)
+        for row in rows:
+            axes[_ROT_PARAMS[row]] = frame @ _ROT_AXES[row]
+            pivots[_ROT_PARAMS[row]] = world[node, :3, 3]
+            frame = frame @ per_param[row]
+    return world, axes, pivots
+
+
 def node_positions_in_world(pose: Pose, shape: BodyShape) -> dict[str, np.ndarray]:
     """Name -> (3,) world position of each joint and end site."""
     world = forward_kinematics(pose, shape)

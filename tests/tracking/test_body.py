@@ -8,15 +8,18 @@ import pytest
 
 from tracking.body import (
     JOINT_NAMES,
+    N_POSE_PARAMS,
     NODE_INDEX,
     NODE_NAMES,
     NODE_PARENTS,
+    PARAM_MOVES_NODE,
     POSE_LAYOUT,
     BodyModel,
     BodyShape,
     Pose,
     forward_kinematics,
     node_positions_in_world,
+    pose_derivative_axes,
     rest_offsets,
     superquadric,
 )
@@ -271,3 +274,22 @@ def test_body_shape_rejects_inconsistent_lengths() -> None:
         replace(SHAPE, thigh=2.0)
     with pytest.raises(ValueError):
         replace(SHAPE, forearm=-0.1)
+
+
+def test_pose_derivatives_match_finite_differences():
+    rng = np.random.default_rng(1)
+    shape = BodyShape.default(1.7)
+    pose = Pose(rng.uniform(-0.5, 0.5, N_POSE_PARAMS))
+    world, axes, pivots = pose_derivative_axes(pose, shape)
+    eps = 1e-6
+    for k, param in enumerate(POSE_LAYOUT):
+        bumped = pose.params.copy()
+        bumped[k] += eps
+        moved = forward_kinematics(Pose(bumped), shape)
+        numeric = (moved[:, :3, 3] - world[:, :3, 3]) / eps
+        if param.kind == "translation":
+            analytic = np.broadcast_to(axes[k], (len(NODE_NAMES), 3))
+        else:
+            analytic = np.cross(axes[k], world[:, :3, 3] - pivots[k])
+        analytic = np.where(PARAM_MOVES_NODE[k][:, None], analytic, 0.0)
+        np.testing.assert_allclose(numeric, analytic, atol=1e-5, err_msg=param.name)

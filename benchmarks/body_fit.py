@@ -1,0 +1,135 @@
+"""Body-model fitting to point clouds, and BVH retargeting residuals (issue 5), one run.
+
+    .venv/bin/python benchmarks/body_fit.py [--poses 24] [--spread 0.5]
+
+Fitting: for each of N random poses (joint angles uniform over the middle `spread` of every
+joint's range, random heading, subject height 1.55-1.95 m) a cloud of 5,000 surface samples is
+drawn, the 30% of the surface facing away from a random horizontal viewpoint is removed and
+5 mm Gaussian noise added; `fit_body` then runs with its defaults. Reported: the mean joint
+position error per pose and per joint (16 nodes: 11 joints and 5 end sites), the success flag,
+and the time per fit. The peer in the same run is the same ICP without the initialisation
+search (rest pose on the principal axes, one orientation), to show what the search buys.
+
+Targets: mean joint position error <= 15 mm over >= 20 random poses; <= 10 s per fit on 2 cores.
+
+Retargeting: every frame of the two CMU clips is retargeted (`tracking.retarget`) and the
+residual per joint (distance between our node and its CMU joint) reported in mm.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from tracking.body import NODE_NAMES, BodyModel, BodyShape, Pose, node_positions_in_world
+from tracking.fit import (
+    _H,
+    N_POSE_PARAMS,
+    FitConfig,
+    _bounds,
+    _initial_x,
+    _orientation_candidates,
+    _Problem,
+    _surface,
+    fit_body,
+    shape_from_scales,
+)
+from tracking.synthetic import body_cloud, random_pose
+
+ROOT = Path(__file__).resolve().parents[1]
+BVH = ROOT.parent / "shared" / "data" / "mocap_bvh"
+
+
+def _errors_mm(joints: dict, truth: dict) -> np.ndarray:
+    return np.array([1000 * np.linalg.norm(np.asarray(joints[n]) - truth[n]) for n in NODE_NAMES])
+
+
+def _no_search(points: np.ndarray) -> dict:
+    """The peer: ICP of the rest-pose model from the principal axes, without any search."""
+    rng = np.random.default_rng(0)
+    points = points[rng.choice(len(points), min(1500, len(points)), replace=False)]
+    rotations, extent = _orientation_candidates(points, 8)
+    problem = _Problem(_surface(), _bounds(extent), FitConfig().robust_scale * extent)
+    x = problem.icp(_initial_x(rotations[0], points, extent), points,
+                    np.arange(N_POSE_PARAMS + 2), rounds=15, steps=3)  # fmt: skip
+    pose = Pose(x[:N_POSE_PARAMS]).clamped()
+    return node_positions_in_world(pose, shape_from_scales(x[_H], 1.0))
+
+
+def fitting(poses: int, spread: float) -> None:
+    print(f"fitting: {poses} random poses (spread {spread}), 5 mm noise, 30% hidden")
+    print(f"{'pose':>4} {'height':>6} {'ours mm':>8} {'max mm':>7} {'no-search mm':>12} "
+          f"{'s/fit':>6} result")  # fmt: skip
+    ours, peer, seconds, ok, per_joint = [], [], [], [], []
+    for k in range(poses):
+        rng = np.random.default_rng(k)
+        height = rng.uniform(1.55, 1.95)
+        shape = BodyShape.default(height)
+        pose = random_pose(rng, spread)
+        points, _ = body_cloud(BodyModel(shape), pose, rng)
+        truth = node_positions_in_world(pose, shape)
+        start = time.perf_counter()
+        result = fit_body(points)
+        seconds.append(time.perf_counter() - start)
+        errors = _errors_mm(result.joints, truth)
+        per_joint.append(errors)
+        ours.append(errors.mean())
+        peer.append(_errors_mm(_no_search(points), truth).mean())
+        ok.append(result.success)
+        print(f"{k:>4} {height:>6.2f} {ours[-1]:>8.1f} {errors.max():>7.0f} {peer[-1]:>12.1f} "
+              f"{seconds[-1]:>6.1f} {result.message}")  # fmt: skip
+    per_joint_mm = np.mean(per_joint, axis=0)
+    print("\nper joint, mean over poses (mm): " + ", ".join(
+        f"{n} {e:.1f}" for n, e in zip(NODE_NAMES, per_joint_mm, strict=True)))  # fmt: skip
+    mean, median = float(np.mean(ours)), float(np.median(ours))
+    print(f"\nmean joint error: ours {mean:.1f} mm (median {median:.1f}, worst pose "
+          f"{max(ours):.1f}); no-search ICP {np.mean(peer):.1f} mm; ratio ours/no-search "
+          f"{mean / np.mean(peer):.3f}")  # fmt: skip
+    print(f"accepted fits: {sum(ok)}/{poses}; time per fit: median {np.median(seconds):.1f} s, "
+          f"max {max(seconds):.1f} s")  # fmt: skip
+    verdict = "PASS" if mean <= 15 else "FAIL"
+    print(f"target mean <= 15 mm over >= 20 poses: {verdict}; target <= 10 s per fit: "
+          f"{'PASS' if np.median(seconds) <= 10 else 'FAIL'} (median)")  # fmt: skip
+
+
+def retargeting() -> None:
+    from tracking.bvh import CMU_METRES_PER_UNIT, read_bvh
+    from tracking.retarget import cmu_node_positions, retarget
+
+    if not BVH.is_dir():
+        print(f"\nretargeting: skipped, {BVH} is absent")
+        return
+    for clip in ("cmu_02_01_walk.bvh", "cmu_131_01_start_walk_stop.bvh"):
+        motion = read_bvh(BVH / clip)
+        start = time.perf_counter()
+        result = retarget(motion, CMU_METRES_PER_UNIT)
+        seconds = time.perf_counter() - start
+        targets = cmu_node_positions(motion, CMU_METRES_PER_UNIT)
+        per_joint = {n: [] for n in targets}
+        for frame, pose in zip(result.frames, result.poses, strict=True):
+            nodes = node_positions_in_world(pose, result.shape)
+            for n, positions in targets.items():
+                per_joint[n].append(1000 * np.linalg.norm(nodes[n] - positions[frame]))
+        print(f"\nretargeting {clip}: {motion.num_frames} frames in {seconds:.1f} s, RMS "
+              f"{1000 * np.sqrt(np.mean(result.residual_rms_m ** 2)):.1f} mm; per joint mean "
+              f"(max) mm:")  # fmt: skip
+        print("  " + ", ".join(f"{n} {np.mean(v):.1f} ({np.max(v):.0f})"
+                               for n, v in per_joint.items()))  # fmt: skip
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--poses", type=int, default=24)
+    parser.add_argument("--spread", type=float, default=0.5)
+    parser.add_argument("--no-retarget", action="store_true")
+    args = parser.parse_args()
+    fitting(args.poses, args.spread)
+    if not args.no_retarget:
+        retargeting()
+
+
+if __name__ == "__main__":
+    main()
