@@ -163,6 +163,43 @@ class Workspace:
         """The fitted body model (`mocap fit`)."""
         return self.root / "body"
 
+    # Video (tracking) workspaces ----------------------------------------------------------
+    @property
+    def cameras_path(self) -> Path:
+        """Calibrated cameras of a video workspace (`tracking.cameras` JSON)."""
+        return self.root / "cameras.json"
+
+    @property
+    def videos_dir(self) -> Path:
+        """Input videos ``<camera name>.<ext>`` (links or copies, never modified)."""
+        return self.root / "videos"
+
+    @property
+    def silhouettes_dir(self) -> Path:
+        """Foreground masks ``<camera name>/<frame:06d>.png`` (0 or 255), frame 0-based."""
+        return self.root / "silhouettes"
+
+    @property
+    def gt_dir(self) -> Path:
+        """Ground truth of synthetic sequences: joints.csv and pose.json."""
+        return self.root / "gt"
+
+    @property
+    def tracks_dir(self) -> Path:
+        """`mocap track` output: joints.csv, pose.json, motion.bvh."""
+        return self.root / "tracks"
+
+    @classmethod
+    def open_video(cls, root: Path | str) -> Workspace:
+        """An existing video workspace; a one-line error when the folder is not one."""
+        ws = cls(root)
+        if not ws.cameras_path.is_file():
+            raise UserError(
+                f"{ws.root} is not a video workspace (no cameras.json); create one with: "
+                f"mocap init-video {ws.root} --videos DIR --calibration FILE, or mocap synth"
+            )
+        return ws
+
     @property
     def logs_dir(self) -> Path:
         return self.root / "logs"
