@@ -7,6 +7,9 @@ plugin. The heavy lifting lives in :mod:`recon.dense` (stereo, fusion) and
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -44,6 +47,37 @@ def load_views(undistorted_dir: Path) -> list[Any]:
     return views
 
 
+PairMap = Callable[..., list[Any]]
+"""``map_fn(fn, items, *shared)`` returning ``[fn(item, *shared) for item in items]`` in input
+order, however it runs them (:func:`recon.batch.map_ordered` runs them as Dask tasks)."""
+
+# Unset (None) in a plain run: the stereo pairs run one after another in this process.
+_stereo_pair_map: contextvars.ContextVar[PairMap | None] = contextvars.ContextVar(
+    "stereo_pair_map", default=None)
+
+
+@contextlib.contextmanager
+def stereo_pairs_mapped_by(map_fn: PairMap) -> Iterator[None]:
+    """Within this block, :class:`CpuStereoBackend` hands its stereo pairs to ``map_fn``.
+
+    A context variable rather than a plugin option: the dense step creates the backend from
+    its name, and how pairs are scheduled changes no result (``map_fn`` keeps pair order).
+    """
+    token = _stereo_pair_map.set(map_fn)
+    try:
+        yield
+    finally:
+        _stereo_pair_map.reset(token)
+
+
+def stereo_pair_depths(pair: tuple[int, int], views: Sequence[Any], config: Any) -> tuple[Any, Any]:
+    """Both depth maps of one stereo pair ``(ref, src)`` of ``views``: one independent task."""
+    from recon.dense.stereo import depths_from_pair
+
+    ref, src = pair
+    return depths_from_pair(views[ref], views[src], config, ref_index=ref, src_index=src)
+
+
 class CpuStereoBackend(Plugin):
     description = ("rectified stereo on the CPU: neighbour pairs, OpenCV SGBM with a left-right "
                    "check, multi-view depth consistency, fused with normals")
@@ -62,7 +96,7 @@ class CpuStereoBackend(Plugin):
 
     def densify(self, context: DenseContext) -> DenseResult:
         from recon.dense.fusion import FusionConfig, filter_consistent, fuse
-        from recon.dense.stereo import StereoConfig, depths_from_pair, select_pairs
+        from recon.dense.stereo import StereoConfig, select_pairs
 
         views = load_views(context.undistorted_dir)
         if len(views) < 2:
@@ -72,14 +106,18 @@ class CpuStereoBackend(Plugin):
         if not pairs:
             raise UserError("no image pair has a usable baseline for stereo "
                             "(views too close together or too far apart)")
-        progress = bar(len(pairs), "stereo", "pair")
         depths = []
-        for ref, src in pairs:
-            # One rectification gives both views' depth maps.
-            depths += depths_from_pair(views[ref], views[src], stereo, ref_index=ref,
-                                       src_index=src)
-            progress.update(1)
-        progress.close()
+        map_pairs = _stereo_pair_map.get()
+        if map_pairs is not None:
+            for maps in map_pairs(stereo_pair_depths, pairs, views, stereo):
+                depths += maps
+        else:
+            progress = bar(len(pairs), "stereo", "pair")
+            for pair in pairs:
+                # One rectification gives both views' depth maps.
+                depths += stereo_pair_depths(pair, views, stereo)
+                progress.update(1)
+            progress.close()
         # Two photos have one pair, whose two depth maps agree by construction: no other view
         # can confirm a point, so only the left-right check filters them.
         needed = min(self.options.min_consistent_views, len(views) - 2)

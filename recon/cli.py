@@ -15,11 +15,16 @@ _EPILOG = """examples:
   mocap init ws/temple --images photos/       make a workspace from a folder of photos
   mocap sfm ws/temple                         sparse model in ws/temple/sparse/0
   mocap run ws/statue --images photos/        photos → sparse → dense → mesh (PLY/OBJ/GLB)
+  mocap batch ws/* --scheduler tcp://HOST:8786   many workspaces as tasks on a Dask cluster
   mocap sfm ws/temple --intrinsics fixed -O focal_px=1520
   mocap compare ws/temple --gt photos/templeSR_par.txt   focal initialisers vs truth
   mocap experiment kruppa-noise               the thesis' noise experiment, table + plot
   mocap fit --cloud person.ply --out DIR      fit the body model to a point cloud
-  mocap report --bvh clip.bvh --out DIR       joint angles, COM, joint loads → DIR/report/
+  mocap synth ws/walk --bvh clip.bvh          synthetic multi-camera silhouettes + ground truth
+  mocap init-video ws/demo --videos videos/ --calibration Calib.qca.txt   a video workspace
+  mocap silhouettes ws/demo                   foreground masks of every video frame
+  mocap track ws/walk                         silhouette tracking → tracks/*.csv, .json, .bvh
+  mocap report ws/walk                        joint angles, COM, joint loads → report/
   mocap view ws/temple                        open the recordings in the Rerun viewer
   mocap plugins                               list the registered plugins
 """
@@ -103,6 +108,25 @@ def _cmd_run(args: argparse.Namespace) -> None:
         f"({mesh.seconds:.1f} s)  {mesh_paths(ws)['ply']}"
     )
     print(f"view        mocap view {ws.root}")
+
+
+def _cmd_batch(args: argparse.Namespace) -> None:
+    from recon.batch import BatchConfig, parse_steps, run_batch
+    from recon.mvs import DenseConfig, MeshConfig
+    from recon.sfm import SfMConfig
+
+    report = run_batch(
+        args.workspaces,
+        config_from_args(BatchConfig, args, steps=parse_steps(args.batch_steps)),
+        config_from_args(SfMConfig, args),
+        config_from_args(DenseConfig, args),
+        config_from_args(MeshConfig, args),
+        overwrite=args.overwrite,
+        echo=print,
+    )
+    print("\n".join(report.lines()))
+    if report.failed:
+        raise UserError(f"{len(report.failed)} of {len(report.results)} workspaces failed")
 
 
 def _cmd_body(args: argparse.Namespace) -> None:
@@ -216,6 +240,62 @@ def _cmd_fit(args: argparse.Namespace) -> None:
         raise UserError("the cloud does not look like one human body (see fit.json)")
 
 
+def _cmd_init_video(args: argparse.Namespace) -> None:
+    from tracking.video import STEP, init_video
+
+    ws = init_video(args.workspace, args.videos, args.calibration, match=args.match,
+                    copy=args.copy, overwrite=args.overwrite)
+    summary = ws.step(STEP).summary
+    print(f"workspace {ws.root}: {len(summary['cameras'])} cameras x {summary['frames']} frames "
+          f"at {summary['fps']:g} fps; {ws.cameras_path}, {ws.videos_dir}")
+    for note in summary["notes"]:
+        print(f"note: {note}", file=sys.stderr)
+
+
+def _cmd_silhouettes(args: argparse.Namespace) -> None:
+    from recon.workspace import Workspace
+    from tracking.silhouette import SilhouetteConfig
+    from tracking.silhouettes_step import SilhouettesConfig, make_silhouettes, summary_lines
+
+    try:
+        thresholds = config_from_args(SilhouetteConfig, args)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    config = config_from_args(SilhouettesConfig, args, thresholds=thresholds)
+    ws = Workspace.open_video(args.workspace)
+    print("\n".join(summary_lines(ws, make_silhouettes(ws, config, overwrite=args.overwrite))))
+
+
+def _cmd_synth(args: argparse.Namespace) -> None:
+    from tracking.synth import SynthConfig, synthesize
+
+    if args.bvh is None:
+        raise UserError("--bvh FILE is required (the clip that drives the body)")
+    result = synthesize(args.workspace, config_from_args(SynthConfig, args),
+                        overwrite=args.overwrite)
+    print("\n".join(result.lines()))
+
+
+def _cmd_track(args: argparse.Namespace) -> None:
+    from recon.workspace import Workspace
+    from tracking.track_step import TrackStepConfig, track_workspace
+    from tracking.tracker import TrackConfig
+
+    ws = Workspace.open_video(args.workspace)
+    summary = track_workspace(ws, config_from_args(TrackStepConfig, args),
+                              config_from_args(TrackConfig, args), overwrite=args.overwrite)
+    note = " (up to date)" if summary.get("up_to_date") else ""
+    print(f"track      {summary['tracked']}/{summary['frames']} frames tracked{note}; median "
+          f"XOR {summary['median_xor_fraction']:.1%} of the silhouette; "
+          f"{summary['seconds_per_frame']:.2f} s/frame; subject height "
+          f"{summary['height_m']:.2f} m")
+    if summary["lost"]:
+        print(f"lost       frames {summary['lost']}")
+    for frame, event in summary.get("events", {}).items():
+        print(f"frame {frame:>5}: {event}")
+    print(f"outputs    {ws.tracks_dir}/joints.csv, pose.json, motion.bvh; {ws.logs_dir}/track.rrd")
+
+
 def _cmd_experiment_kruppa_noise(args: argparse.Namespace) -> None:
     from recon.calibration.experiment import KruppaNoiseConfig, run_kruppa_noise
 
@@ -246,6 +326,7 @@ def _step_command(
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from recon.batch import BatchConfig
     from recon.calibration.compare import CompareConfig
     from recon.calibration.experiment import KruppaNoiseConfig
     from recon.demo import DemoConfig
@@ -255,6 +336,11 @@ def build_parser() -> argparse.ArgumentParser:
     from tracking.fit import FitConfig
     from tracking.fit_cloud import SubjectConfig
     from tracking.report import ReportConfig
+    from tracking.silhouette import SilhouetteConfig
+    from tracking.silhouettes_step import SilhouettesConfig
+    from tracking.synth import SynthConfig
+    from tracking.track_step import TrackStepConfig
+    from tracking.tracker import TrackConfig
 
     parser = argparse.ArgumentParser(
         prog="mocap",
@@ -342,6 +428,26 @@ def build_parser() -> argparse.ArgumentParser:
     add_config_arguments(p, MeshConfig)
     p.set_defaults(func=_cmd_run)
 
+    p = sub.add_parser(
+        "batch",
+        help="many workspaces' sfm, dense and mesh steps as tasks on a Dask cluster",
+        description="Run the steps of every workspace as Dask tasks: on a LocalCluster "
+        "sized to this machine, or on a running scheduler (--scheduler). Dense stereo "
+        "pairs are tasks of their own. A failed workspace is reported and the others go on; "
+        "a re-run reuses every finished step. Workspaces must be on a file system that every "
+        "worker sees at the same path.",
+    )
+    p.add_argument("workspaces", type=Path, nargs="+", metavar="WS",
+                   help="workspace folders (made with `mocap init`)")
+    p.add_argument("--steps", dest="batch_steps", default="sfm,dense,mesh", metavar="STEPS",
+                   help="steps to run, comma-separated (default: sfm,dense,mesh)")
+    p.add_argument("--overwrite", action="store_true", help="recompute every step")
+    add_config_arguments(p, BatchConfig, exclude=("steps",))
+    add_config_arguments(p, SfMConfig, exclude=("num_threads",))
+    add_config_arguments(p, DenseConfig)
+    add_config_arguments(p, MeshConfig)
+    p.set_defaults(func=_cmd_batch)
+
     p = _step_command(
         sub,
         "compare",
@@ -386,6 +492,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_body)
 
     p = sub.add_parser(
+        "track",
+        help="track the body through a video workspace's silhouettes",
+        description="Multi-view silhouette tracking (thesis ch. 6): per frame, the pose whose "
+        "rendered silhouettes best overlap WS/silhouettes in every camera (XOR energy on an "
+        "image pyramid), optimised root first, then spine and neck, then each limb (grid "
+        "search + downhill simplex). The first frame is initialised automatically from the "
+        "visual hull (or --init-pose). Writes WS/tracks/joints.csv, pose.json, motion.bvh and "
+        "WS/logs/track.rrd.",
+    )
+    p.add_argument("workspace", type=Path, metavar="WS", help="video workspace")
+    p.add_argument("--overwrite", action="store_true", help="recompute even if up to date")
+    add_config_arguments(p, TrackStepConfig)
+    add_config_arguments(p, TrackConfig)
+    p.set_defaults(func=_cmd_track)
+
+    p = sub.add_parser(
         "fit",
         help="fit the articulated body model to a human point cloud",
         description="Estimate the body's height, girth and 24 pose parameters from a point "
@@ -421,6 +543,57 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true", help="recompute even if up to date")
     add_config_arguments(p, ReportConfig)
     p.set_defaults(func=_cmd_report)
+
+    p = _step_command(
+        sub,
+        "synth",
+        help="synthetic multi-camera silhouette sequence of a BVH clip, with ground truth",
+        description="Drive the body model with a BVH clip, render its silhouettes from "
+        "calibrated cameras on a ring around it and add background-subtraction noise (boundary "
+        "jitter, holes, a floor shadow). Writes a video workspace: WS/cameras.json, "
+        "WS/silhouettes/<camera>/<frame:06d>.png, WS/gt/joints.csv, WS/gt/pose.json and "
+        "WS/logs/synth.rrd. Re-running with the same settings is skipped unless --overwrite.",
+    )
+    add_config_arguments(p, SynthConfig)
+    p.set_defaults(func=_cmd_synth)
+
+    p = sub.add_parser(
+        "init-video",
+        help="make a video workspace from synchronised videos and their calibration",
+        description="Make a video workspace: WS/cameras.json from the calibration (COLMAP model "
+        "folder, Qualisys .qca.txt, or mocap-cameras-v1 JSON) and WS/videos/<camera>.<ext>, "
+        "hard links (or copies) of the videos, never modified. A camera goes with the video "
+        "named like it (any case), or with --match order the k-th camera of the file with the "
+        "k-th video by the number in its name (Pose2Sim's rule). The videos must have the same "
+        "frame count and their cameras' image size (or be that image scaled to fit with black "
+        "bars, whose camera is then adjusted).",
+    )
+    p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder to create")
+    p.add_argument("--videos", type=Path, required=True, metavar="DIR",
+                   help="folder of synchronised videos, one per camera")
+    p.add_argument("--calibration", type=Path, required=True, metavar="FILE",
+                   help="calibration of the cameras (file, or COLMAP model folder)")
+    p.add_argument("--match", choices=("name", "order"), default="name",
+                   help="pair cameras and videos by name (default) or by order")
+    p.add_argument("--copy", action="store_true", help="copy instead of hard-linking")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the videos and cameras of an existing workspace (derived "
+                   "files are removed)")
+    p.set_defaults(func=_cmd_init_video)
+
+    p = _step_command(
+        sub,
+        "silhouettes",
+        help="foreground masks of every camera's video frames (background subtraction)",
+        description="Per camera, a background model (temporal median of the video, or mean and "
+        "spread of empty-scene frames) and per frame a full-resolution silhouette: thresholds "
+        "for foreground, background and shadow, then morphological clean-up. Writes "
+        "WS/silhouettes/<camera>/<frame:06d>.png (0/255) and WS/logs/silhouettes.rrd; frames "
+        "whose silhouette is empty or touches the image border are reported.",
+    )
+    add_config_arguments(p, SilhouettesConfig, exclude=("thresholds",))
+    add_config_arguments(p, SilhouetteConfig)
+    p.set_defaults(func=_cmd_silhouettes)
 
     p = sub.add_parser("view", help="open the workspace's recordings in the Rerun viewer")
     p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder")

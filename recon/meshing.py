@@ -232,6 +232,10 @@ def poisson_mesh(
         linear_fit=config.linear_fit,
         samples_per_node=config.samples_per_node,
         point_weight=config.point_weight,
+        # One thread: Open3D's multi-threaded Poisson differs in the last digits from run to
+        # run and can crash under full CPU load (Open3D issues #7229, #6828); one thread was
+        # not slower here (4.7 s vs 5.4 s at depth 9 on 2 cores).
+        n_threads=1,
     )
     densities = np.asarray(densities_vector)
     vertices = np.asarray(mesh.vertices)

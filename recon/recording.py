@@ -103,14 +103,15 @@ def log_camera_image(
     rec: rr.RecordingStream,
     *,
     image_name: str,
-    image_path: Path,
+    image_path: Path | None,
     K: np.ndarray,
     width: int,
     height: int,
     cam_from_world: np.ndarray | None = None,
     points2D: np.ndarray | None = None,
 ) -> None:
-    """Log one camera: pose (if known), pinhole, photo and keypoints (``points2D``: (N, 2) px).
+    """Log one camera: pose (if known), pinhole, photo (unless ``image_path`` is None) and
+    keypoints (``points2D``: (N, 2) px).
 
     ``K`` is the 3x3 calibration in pixels of the full-size image.
     """
@@ -133,7 +134,7 @@ def log_camera_image(
         camera_xyz=rr.ViewCoordinates.RDF,
         image_plane_distance=0.5,
     )
-    photo = _encoded_image(image_path, (width, height), scale)
+    photo = None if image_path is None else _encoded_image(image_path, (width, height), scale)
     rec.log(f"{base}/image", pinhole, *([photo] if photo is not None else []), static=True)
     if points2D is not None and len(points2D):
         rec.log(
@@ -310,6 +311,116 @@ def log_skeleton(
         rr.Points3D(points, radii=radius, class_ids=class_id, keypoint_ids=np.arange(len(points))),
         static=static,
     )
+
+
+# Silhouettes: class 0 is the background, 1 the person (foreground).
+SILHOUETTE_CLASSES = ((0, "background", (0, 0, 0)), (1, "person", (255, 190, 40)))
+
+
+def log_silhouette_context(rec: rr.RecordingStream, entity: str = "world/cameras") -> None:
+    """Static colours and labels of the silhouette classes, for every mask logged below
+    ``entity``."""
+    rec.log(entity, rr.AnnotationContext([rr.AnnotationInfo(id=i, label=label, color=color)
+                                          for i, label, color in SILHOUETTE_CLASSES]),
+            static=True)  # fmt: skip
+
+
+def log_silhouette(
+    rec: rr.RecordingStream, entity: str, mask: np.ndarray, frame: int, time_s: float
+) -> None:
+    """A foreground mask (H, W) (bool, or 0/255) as a `SegmentationImage` of one frame on the
+    ``frame`` and ``time`` timelines; downscaled like `log_camera_image`'s Pinhole, so logged at
+    a camera's ``.../image`` entity it overlays that camera's view."""
+    ids = (np.asarray(mask) > 0).astype(np.uint8)
+    height, width = ids.shape
+    scale = _display_scale(width, height)
+    if scale < 1.0:
+        ids = cv2.resize(ids, (round(width * scale), round(height * scale)),
+                         interpolation=cv2.INTER_NEAREST)
+    rec.set_time(FRAME_TIMELINE, sequence=frame)
+    rec.set_time(TIME_TIMELINE, duration=time_s)
+    rec.log(entity, rr.SegmentationImage(ids))
+    rec.reset_time()
+
+
+def log_frame_image(
+    rec: rr.RecordingStream, entity: str, image_bgr: np.ndarray, frame: int | None = None,
+    time_s: float | None = None,
+) -> None:  # fmt: skip
+    """A video frame (H, W, 3) BGR uint8 as JPEG on the ``frame`` and ``time`` timelines (static
+    when ``frame`` is None), downscaled like `log_camera_image`'s Pinhole: at a camera's
+    ``.../image`` entity it fills that camera's view and `log_silhouette` masks overlay it."""
+    height, width = image_bgr.shape[:2]
+    scale = _display_scale(width, height)
+    if scale < 1.0:
+        image_bgr = cv2.resize(image_bgr, (round(width * scale), round(height * scale)),
+                               interpolation=cv2.INTER_AREA)
+    ok, data = cv2.imencode(".jpg", image_bgr, [cv2.IMWRITE_JPEG_QUALITY, 85])
+    if not ok:
+        return
+    if frame is not None:
+        rec.set_time(FRAME_TIMELINE, sequence=frame)
+        if time_s is not None:
+            rec.set_time(TIME_TIMELINE, duration=time_s)
+    rec.log(entity, rr.EncodedImage(contents=data.tobytes(), media_type="image/jpeg"),
+            static=frame is None)
+    rec.reset_time()
+
+
+# XOR overlay of tracking: which silhouette covers a pixel (model, image, both).
+XOR_CLASSES = ((0, "neither", (0, 0, 0)), (1, "model only", (230, 60, 60)),
+               (2, "image only", (60, 120, 240)), (3, "both", (200, 200, 200)))  # fmt: skip
+
+
+def log_xor_overlay(
+    rec: rr.RecordingStream, entity: str, model: np.ndarray, image: np.ndarray, frame: int,
+    time_s: float,
+) -> None:  # fmt: skip
+    """Model and image silhouettes (H, W) bool as one `SegmentationImage` (class = model +
+    2 * image, so XOR pixels are classes 1 and 2), with its own static `AnnotationContext`."""
+    rec.log(entity, rr.AnnotationContext([rr.AnnotationInfo(id=i, label=label, color=color)
+                                          for i, label, color in XOR_CLASSES]),
+            static=True)  # fmt: skip
+    ids = (np.asarray(model, bool).astype(np.uint8) + 2 * np.asarray(image, bool)).astype(np.uint8)
+    height, width = ids.shape
+    scale = _display_scale(width, height)
+    if scale < 1.0:
+        ids = cv2.resize(ids, (round(width * scale), round(height * scale)),
+                         interpolation=cv2.INTER_NEAREST)
+    rec.set_time(FRAME_TIMELINE, sequence=frame)
+    rec.set_time(TIME_TIMELINE, duration=time_s)
+    rec.log(entity, rr.SegmentationImage(ids))
+    rec.reset_time()
+
+
+def log_mesh_frame(
+    rec: rr.RecordingStream, entity: str, vertices: np.ndarray, faces: np.ndarray, frame: int,
+    time_s: float,
+) -> None:  # fmt: skip
+    """A mesh that moves: its vertices on the ``frame`` and ``time`` timelines."""
+    rec.set_time(FRAME_TIMELINE, sequence=frame)
+    rec.set_time(TIME_TIMELINE, duration=time_s)
+    rec.log(entity, rr.Mesh3D(vertex_positions=np.asarray(vertices, dtype=np.float32),
+                              triangle_indices=np.asarray(faces, dtype=np.uint32)))  # fmt: skip
+    rec.reset_time()
+
+
+def log_skeleton_frame(
+    rec: rr.RecordingStream, entity: str, points_in_world: np.ndarray, frame: int, time_s: float,
+) -> None:  # fmt: skip
+    """`log_skeleton` of one frame on the ``frame`` and ``time`` timelines."""
+    rec.set_time(FRAME_TIMELINE, sequence=frame)
+    rec.set_time(TIME_TIMELINE, duration=time_s)
+    log_skeleton(rec, entity, points_in_world)
+    rec.reset_time()
+
+
+def log_frame_scalar(rec: rr.RecordingStream, entity: str, value: float, frame: int,
+                     time_s: float) -> None:  # fmt: skip
+    rec.set_time(FRAME_TIMELINE, sequence=frame)
+    rec.set_time(TIME_TIMELINE, duration=time_s)
+    rec.log(entity, rr.Scalars(float(value)))
+    rec.reset_time()
 
 
 def viewer_command(recordings: Sequence[Path]) -> list[str]:

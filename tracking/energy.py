@@ -104,9 +104,10 @@ class SilhouetteEnergy:
     def model_masks(self, pose: Pose, level: int = 0) -> list[np.ndarray]:
         """The model's (h, w) bool silhouette in every view at ``level``."""
         self._check_level(level)
+        from tracking.render import render_views
+
         vertices = self.model.posed_vertices(pose)
-        return [np.asarray(self.renderer.render(vertices, self.model.faces, camera), dtype=bool)
-                for camera in self.cameras[level]]
+        return render_views(self.renderer, vertices, self.model.faces, self.cameras[level])
 
     def xor_masks(self, pose: Pose, level: int = 0) -> list[np.ndarray]:
         """Per view, the (h, w) bool XOR of model and image silhouettes (for display)."""

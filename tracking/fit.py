@@ -428,10 +428,12 @@ def _search_limbs(problem: _Problem, x: np.ndarray, points: np.ndarray) -> np.nd
     lo, hi = problem.bounds
     for limb, idx in _LIMBS.items():
         trials = []
+        # Pre-scoring on every 4th surface sample: 4x cheaper, the ranking barely changes.
+        sparse = np.arange(0, len(problem.surface.node), 4)
         for candidate in _candidates(limb):
             y = x.copy()
             y[idx] = np.clip(_limb_values(limb, candidate), lo[idx], hi[idx])
-            trials.append((problem.cost(y, points), y))
+            trials.append((problem.cost(y, points, sparse), y))
         trials.sort(key=lambda item: item[0])
         scored = [(problem.cost(x, points), x)]
         for _, y in trials[:_REFINED_CANDIDATES]:

@@ -29,7 +29,7 @@ import os
 import subprocess
 import sys
 from collections import OrderedDict
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -164,6 +164,13 @@ class CpuRasterRenderer(Plugin):
             normal = np.cross(b - a, c - a)
             keep &= np.einsum("ij,ij->i", normal, camera.center_in_world - a) > 0
         return rasterize_triangles(uv, tris[keep], camera.width, camera.height)
+
+
+def render_views(renderer: Any, vertices_in_world: Any, faces: Any,
+                 cameras: Sequence[Camera]) -> list[np.ndarray]:  # fmt: skip
+    """(H, W) bool silhouettes of one mesh in every camera (one `render` per camera)."""
+    return [np.asarray(renderer.render(vertices_in_world, faces, c), dtype=bool)
+            for c in cameras]  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------------------

@@ -76,6 +76,46 @@ CMU_TO_BODY: dict[str, str] = {
     "l_ankle": "LeftFoot",
     "r_ankle": "RightFoot",
 }
+# The same points in the other CMU export, with the ASF bone names (e.g. the bvh11 clips):
+# LeftHip/LeftKnee/LeftAnkle start the femur/tibia/foot bones, the first "Chest" is the top of
+# the lower back (our spine), "Neck" starts the upper neck (CMU_TO_BODY's Neck1).
+CMU_ASF_TO_BODY: dict[str, str] = {
+    "pelvis": "LeftHip+RightHip",
+    "spine": "Chest",
+    "neck": "Neck",
+    "head_top": "Head_end",
+    "l_shoulder": "LeftShoulder",
+    "r_shoulder": "RightShoulder",
+    "l_elbow": "LeftElbow",
+    "r_elbow": "RightElbow",
+    "l_wrist": "LeftWrist",
+    "r_wrist": "RightWrist",
+    "l_hip": "LeftHip",
+    "r_hip": "RightHip",
+    "l_knee": "LeftKnee",
+    "r_knee": "RightKnee",
+    "l_ankle": "LeftAnkle",
+    "r_ankle": "RightAnkle",
+}
+# Per naming: the node map, the joint below the head (for a zero-length Head_end), and each
+# side's ankle and toe-tip joints (for the floor and foot length).
+_NAMINGS: tuple[tuple[dict[str, str], str, str, str], ...] = (
+    (CMU_TO_BODY, "Neck1", "{side}Foot", "{side}ToeBase_end"),
+    (CMU_ASF_TO_BODY, "Neck", "{side}Ankle", "{side}Toe_end"),
+)
+
+
+def cmu_naming(motion: Motion) -> tuple[dict[str, str], str, str, str]:
+    """The CMU naming `motion` uses (see `_NAMINGS`); ValueError when it is neither."""
+    names = set(motion.joint_names)
+    for naming in _NAMINGS:
+        needed = {p for spec in naming[0].values() for p in spec.split("+")}
+        if needed <= names:
+            return naming
+    missing = sorted({p for spec in CMU_TO_BODY.values() for p in spec.split("+")} - names)
+    raise ValueError(f"not a CMU skeleton (no joint {', '.join(missing[:3])}, ...)")
+
+
 # Head top = Head + _HEAD_EXTENSION * (Head - Neck1) when Head_end has a zero-length offset.
 _HEAD_EXTENSION: float = 1.0
 _GIRTHS: tuple[str, ...] = (
@@ -90,17 +130,18 @@ def cmu_node_positions(motion: Motion, metres_per_unit: float) -> dict[str, np.n
     """Node name -> (F, 3) world positions in metres of the CMU points of `CMU_TO_BODY`."""
     pos = np.asarray(bvh_forward_kinematics(motion, scale=metres_per_unit))
     names = motion.joint_names
+    mapping, below_head, _, _ = cmu_naming(motion)
 
     def joint(name: str) -> np.ndarray:
         if name == "Head_end":
             end = motion.joints[motion.joint_index(name)]
             if np.linalg.norm(end.offset) == 0.0:
-                head, neck1 = pos[:, names.index("Head")], pos[:, names.index("Neck1")]
+                head, neck1 = pos[:, names.index("Head")], pos[:, names.index(below_head)]
                 return head + _HEAD_EXTENSION * (head - neck1)
         return pos[:, names.index(name)]
 
     out = {}
-    for node, spec in CMU_TO_BODY.items():
+    for node, spec in mapping.items():
         parts = spec.split("+")
         out[node] = np.mean([joint(p) for p in parts], axis=0)
     return out
@@ -130,12 +171,13 @@ def shape_from_motion(motion: Motion, metres_per_unit: float, frame: int | None 
         return 0.5 * (_median_distance(p["l_" + a], p["l_" + b])
                       + _median_distance(p["r_" + a], p["r_" + b]))  # fmt: skip
 
-    floor = min(pos[:, names.index(f"{s}ToeBase_end"), 1].min() for s in ("Left", "Right"))
+    _, _, ankle, toe_tip = cmu_naming(motion)
+    sides = ("Left", "Right")
+    floor = min(pos[:, names.index(toe_tip.format(side=s)), 1].min() for s in sides)
     ankle_height = float(min(p["l_ankle"][:, 1].min(), p["r_ankle"][:, 1].min()) - floor)
-    toe = 0.5 * sum(
-        _median_distance(pos[:, names.index(f"{s}Foot")], pos[:, names.index(f"{s}ToeBase_end")])
-        for s in ("Left", "Right")
-    )
+    toe = 0.5 * sum(_median_distance(pos[:, names.index(ankle.format(side=s))],
+                                     pos[:, names.index(toe_tip.format(side=s))])
+                    for s in sides)  # fmt: skip
     lengths = {
         "pelvis_to_spine": _median_distance(p["pelvis"], p["spine"]),
         "spine_to_neck": _median_distance(p["spine"], p["neck"]),

@@ -161,3 +161,16 @@ def test_retarget_cmu_walk(walk_result) -> None:
     knees = np.degrees([[p.params[PARAM_INDEX[k]] for k in ("l_knee_flex", "r_knee_flex")]
                         for p in r.poses])  # fmt: skip
     assert knees.max() > 20.0
+
+
+def test_the_asf_named_cmu_clip_retargets_too():
+    from tracking.retarget import CMU_ASF_TO_BODY, cmu_naming
+
+    clip_path = DATA / "cmu_131_01_start_walk_stop.bvh"
+    if not clip_path.exists():
+        pytest.skip(f"CMU clip not found at {clip_path}")
+    clip = read_bvh(clip_path)
+    assert cmu_naming(clip)[0] is CMU_ASF_TO_BODY
+    result = retarget(clip, CMU_METRES_PER_UNIT, frames=range(0, clip.num_frames, 50))
+    assert 1.4 < result.shape.height < 1.9
+    assert result.summary["mean_residual_mm"] < 25

@@ -1,0 +1,107 @@
+"""Silhouette tracking on real video: the Pose2Sim demo (issue 6), one run.
+
+    .venv/bin/python benchmarks/tracking_pose2sim.py [--keep DIR] [--last N]
+
+`mocap init-video` (Calib.qca.txt), `mocap silhouettes` (temporal-median background: the demo
+has no empty frame) and `mocap track` with their defaults, then the silhouette IoU between the
+tracked model and the image silhouettes, per camera per frame, and a picture of the overlay
+(model red, image blue, both grey) for a few frames: benchmarks/out/tracking_pose2sim.png.
+
+Target: track all 100 frames; median IoU >= 0.8.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DEMO = ROOT.parent / "shared" / "data" / "pose2sim_demo"
+OUT = ROOT / "benchmarks" / "out"
+
+
+def _mocap(*args: str) -> float:
+    start = time.perf_counter()
+    result = subprocess.run([sys.executable, "-m", "recon.cli", *args], capture_output=True,
+                            text=True)  # fmt: skip
+    if result.returncode != 0:
+        sys.exit(f"mocap {' '.join(args)} failed:\n{result.stderr}")
+    print(result.stdout.strip())
+    return time.perf_counter() - start
+
+
+def main() -> None:
+    from tracking.body import BodyModel, BodyShape, Pose
+    from tracking.cameras import read_cameras
+    from tracking.energy import iou
+    from tracking.render import CpuRasterRenderer
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--keep", type=Path, help="keep the workspace in this folder")
+    parser.add_argument("--last", type=int, help="track frames 0..LAST only")
+    args = parser.parse_args()
+    if not DEMO.is_dir():
+        sys.exit(f"{DEMO} is absent")
+    with tempfile.TemporaryDirectory() as tmp:
+        ws = args.keep or Path(tmp) / "pose2sim"
+        if not (ws / "cameras.json").exists():
+            _mocap("init-video", str(ws), "--videos", str(DEMO / "videos"), "--calibration",
+                   str(DEMO / "calibration" / "Calib.qca.txt"))  # fmt: skip
+        t_sil = _mocap("silhouettes", str(ws))
+        extra = ["--last", str(args.last)] if args.last is not None else []
+        t_track = _mocap("track", str(ws), *extra)
+        pose_file = json.loads((ws / "tracks" / "pose.json").read_text())
+        model = BodyModel(BodyShape(**pose_file["shape"]))
+        cameras = read_cameras(ws / "cameras.json")
+        render = CpuRasterRenderer(CpuRasterRenderer.Options())
+        ious = {c.name: [] for c in cameras}
+        lost, pictures = [], []
+        frames = pose_file["frames"]
+        show = {frames[0]["frame"], frames[len(frames) // 2]["frame"], frames[-1]["frame"]}
+        for entry in frames:
+            if entry["params"] is None:
+                lost.append(entry["frame"])
+                continue
+            vertices = model.posed_vertices(Pose(entry["params"]))
+            row = []
+            for cam in cameras:
+                image = cv2.imread(str(ws / "silhouettes" / cam.name /
+                                       f"{entry['frame']:06d}.png"), 0) > 127  # fmt: skip
+                mask = render.render(vertices, model.faces, cam)
+                ious[cam.name].append(iou(mask, image))
+                if entry["frame"] in show:
+                    over = np.zeros((*mask.shape, 3), np.uint8)
+                    over[mask & ~image] = (60, 60, 230)
+                    over[image & ~mask] = (240, 120, 60)
+                    over[mask & image] = (200, 200, 200)
+                    row.append(cv2.resize(over, (over.shape[1] // 4, over.shape[0] // 4)))
+            if row:
+                pictures.append(np.hstack(row))
+        print(f"\ntracked {len(frames) - len(lost)}/{len(frames)} frames; lost: {lost or 'none'}")
+        print("silhouette IoU per camera (median, min over frames):")
+        for name, values in ious.items():
+            print(f"  {name}: median {np.median(values):.3f}, min {np.min(values):.3f}")
+        every = np.concatenate([v for v in ious.values()])
+        median = float(np.median(every))
+        print(f"all cameras and frames: median IoU {median:.3f}; target >= 0.8: "
+              f"{'PASS' if median >= 0.8 and not lost else 'FAIL'}")  # fmt: skip
+        print(f"time: silhouettes {t_sil:.0f} s, track {t_track:.0f} s "
+              f"({len(frames) / t_track:.2f} frames/s)")  # fmt: skip
+        OUT.mkdir(parents=True, exist_ok=True)
+        if pictures:
+            width = max(p.shape[1] for p in pictures)
+            pictures = [np.pad(p, ((0, 0), (0, width - p.shape[1]), (0, 0))) for p in pictures]
+            cv2.imwrite(str(OUT / "tracking_pose2sim.png"), np.vstack(pictures))
+            print(f"overlay: {OUT / 'tracking_pose2sim.png'} (frames {sorted(show)})")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,171 @@
+"""`mocap silhouettes` against known masks: synthetic videos of a moving blob, and the Pose2Sim
+demo for plausibility."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from recon.errors import UserError
+from recon.workspace import Workspace
+from tests.helpers import recording_entities, run_cli, shared_dataset
+from tests.tracking.test_video import FRAMES, HEIGHT, WIDTH, digest, make_blob_scene
+from tracking.cameras import read_cameras
+from tracking.silhouette import BackgroundModel
+from tracking.silhouettes_step import SilhouettesConfig, make_silhouettes, median_background
+from tracking.video import init_video
+
+
+@pytest.fixture(scope="module")
+def blob_workspace(tmp_path_factory: pytest.TempPathFactory):
+    folder = tmp_path_factory.mktemp("blob")
+    videos, calibration, truth = make_blob_scene(folder)
+    return init_video(folder / "ws", videos, calibration), videos, truth
+
+
+def read_mask(path: Path) -> np.ndarray:
+    mask = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    assert mask is not None and mask.dtype == np.uint8 and mask.ndim == 2, path
+    assert set(np.unique(mask)) <= {0, 255}
+    return mask > 0
+
+
+def iou(a: np.ndarray, b: np.ndarray) -> float:
+    return float((a & b).sum() / max((a | b).sum(), 1))
+
+
+def test_median_background_equals_from_sequence():
+    rng = np.random.default_rng(3)
+    frames = [rng.integers(0, 256, (17, 23, 3), dtype=np.uint8) for _ in range(9)]
+    frames[4][:5] = 255  # something passing through
+    ours = median_background(frames)
+    reference = BackgroundModel.from_sequence(frames)
+    np.testing.assert_array_equal(ours.mean, reference.mean)
+    np.testing.assert_allclose(ours.std, reference.std, rtol=1e-6)
+    with pytest.raises(ValueError, match="odd"):
+        median_background(frames[:8])
+
+
+def test_silhouettes_of_a_moving_blob_match_the_truth(blob_workspace):
+    ws, videos, truth = blob_workspace
+    before = digest(videos)
+    record = make_silhouettes(ws, SilhouettesConfig())
+    assert digest(videos) == before  # the inputs are only read
+    for k, masks in enumerate(truth):
+        folder = ws.silhouettes_dir / f"cam{k:02d}"
+        assert sorted(p.name for p in folder.iterdir()) == [f"{i:06d}.png" for i in
+                                                            range(FRAMES)]
+        scores = []
+        for i, expected in enumerate(masks):
+            got = read_mask(folder / f"{i:06d}.png")
+            assert got.shape == (HEIGHT, WIDTH)
+            if expected.any():
+                scores.append(iou(got, expected))
+            else:
+                assert not got.any(), f"cam{k:02d} frame {i}: foreground with the blob away"
+        # 1 px of edge error on a 26 x 34 px ellipse costs about 0.07 of IoU.
+        assert np.mean(scores) >= 0.9 and min(scores) >= 0.8, (k, scores)
+        summary = record.summary["cameras"][f"cam{k:02d}"]
+        # The blob is out of view in frames 0, 1, 22, 23 and crosses the border in between.
+        empty = [i for i, m in enumerate(masks) if not m.any()]
+        touching = [i for i, m in enumerate(masks)
+                    if m.any() and (m[:, 0].any() or m[:, -1].any())]
+        assert summary["empty_frames"] == empty == [0, 1, 22, 23]
+        assert summary["border_frames"] == touching
+        true_fraction = np.median([m.mean() for m in masks])
+        assert summary["foreground_fraction"]["median"] == pytest.approx(true_fraction, rel=0.1)
+    assert "cam00: empty silhouette in frame(s) 0-1, 22-23 (subject out of view?)" in (
+        record.summary["warnings"])
+    # Unchanged settings: reused without touching the masks; a changed setting recomputes.
+    stamp = (ws.silhouettes_dir / "cam00" / "000005.png").stat().st_mtime_ns
+    assert make_silhouettes(ws, SilhouettesConfig()).fingerprint == record.fingerprint
+    assert (ws.silhouettes_dir / "cam00" / "000005.png").stat().st_mtime_ns == stamp
+
+
+def test_frame_range_and_empty_background_frames(blob_workspace, tmp_path: Path):
+    ws, _, truth = blob_workspace
+    # Frames 0-1 show the empty scene: the thesis' mean-and-deviation background.
+    config = SilhouettesConfig(background="frames:0-1", first=4, last=16, frame_step=4,
+                               logged_frames=0)
+    record = make_silhouettes(ws, config)
+    assert sorted(p.name for p in (ws.silhouettes_dir / "cam01").iterdir()) == [
+        "000004.png", "000008.png", "000012.png", "000016.png"]
+    assert record.summary["processed"] == 4 and record.summary["frames"] == [4, 16, 4]
+    for i in (4, 8, 12, 16):
+        assert iou(read_mask(ws.silhouettes_dir / "cam01" / f"{i:06d}.png"),
+                   truth[1][i]) >= 0.85
+    with pytest.raises(UserError, match="past the last frame 23"):
+        make_silhouettes(ws, SilhouettesConfig(last=30))
+    with pytest.raises(UserError, match="frames:A-B"):
+        SilhouettesConfig(background="empty")
+    with pytest.raises(UserError, match="not a video workspace"):
+        make_silhouettes(Workspace(tmp_path), SilhouettesConfig())
+
+
+def test_the_cli_reports_frames_without_subject_and_records_them(tmp_path: Path):
+    videos, calibration, _ = make_blob_scene(tmp_path / "scene", cameras=2,
+                                             suffixes=(".avi",))
+    ws = tmp_path / "ws"
+    result = run_cli("init-video", ws, "--videos", videos, "--calibration", calibration)
+    assert result.returncode == 0, result.stderr
+    result = run_cli("silhouettes", ws, "--logged-frames", "2", "--min-area", "80")
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith(f"silhouettes  2 cameras x {FRAMES} frames (0-{FRAMES - 1})")
+    assert "warning      cam01: empty silhouette in frame(s) 0-1, 22-23 " \
+        "(subject out of view?)" in lines
+    assert any(line.startswith("warning      cam00: silhouette touches the image border")
+               for line in lines)
+    assert Workspace(ws).step("silhouettes").config["thresholds"]["min_area"] == 80
+    entities = recording_entities(ws / "logs" / "silhouettes.rrd")
+    for needed in ("/world/cameras/cam00/image@Pinhole",
+                   "/world/cameras/cam00/image@EncodedImage",
+                   "/world/cameras/cam01/image/silhouette@SegmentationImage",
+                   "/silhouettes/cam01/foreground_fraction@Scalars"):
+        assert any(e.startswith(needed) for e in entities), (needed, sorted(entities))
+    assert not list((ws / "logs").glob("*partial*"))
+    # An empty-silhouette-in-every-frame workspace gets its own clear warning.
+    result = run_cli("silhouettes", ws, "--first", "0", "--last", "1")
+    assert result.returncode == 0 and "every silhouette is empty" in result.stdout
+
+
+@pytest.mark.shared_data
+def test_silhouettes_of_the_pose2sim_demo_are_one_person(tmp_path: Path):
+    """No empty background exists: the temporal median. 4 frames per camera, 11 background
+    samples; the person covers a few percent of each portrait frame."""
+    demo = shared_dataset("pose2sim_demo")
+    before = {p.name: hashlib.sha256(p.read_bytes()).hexdigest()
+              for p in (demo / "videos").iterdir()}
+    ws = init_video(tmp_path / "ws", demo / "videos", demo / "calibration" / "Calib.qca.txt")
+    config = SilhouettesConfig(first=0, last=99, frame_step=33, background_samples=11,
+                               logged_frames=1)
+    record = make_silhouettes(ws, config)
+    for name, summary in record.summary["cameras"].items():
+        assert summary["frames"] == 4
+        assert 0.01 <= summary["foreground_fraction"]["median"] <= 0.4, name
+        assert summary["empty_frames"] == []
+    # The four views agree on one body: the median pixels of the silhouettes triangulate to a
+    # point 0.6-1.2 m above the lab floor (Z up; the pelvis of a standing adult) that projects
+    # within 200 px of each of them (ghosts of other poses pull a median by up to ~120 px; a
+    # camera paired with the wrong video misses by far more).
+    cameras = read_cameras(ws.cameras_path)
+    for index in (0, 33, 66, 99):
+        rows, pixels = [], []
+        for cam in cameras:
+            ys, xs = np.nonzero(read_mask(ws.silhouettes_dir / cam.name / f"{index:06d}.png"))
+            uv = np.array([np.median(xs), np.median(ys)]) + 0.5  # pixel centres at +0.5
+            xy = cam.undistort((np.linalg.inv(cam.K) @ [*uv, 1.0])[None, :2])[0]
+            rows += [xy[0] * cam.cam_from_world[2] - cam.cam_from_world[0],
+                     xy[1] * cam.cam_from_world[2] - cam.cam_from_world[1]]
+            pixels.append(uv)
+        homogeneous = np.linalg.svd(np.array(rows))[2][-1]
+        point = homogeneous[:3] / homogeneous[3]
+        assert 0.6 < point[2] < 1.2 and np.hypot(point[0], point[1]) < 2.5, (index, point)
+        for cam, uv in zip(cameras, pixels, strict=True):
+            assert np.linalg.norm(cam.project(point[None])[0][0] - uv) < 200, (index, cam.name)
+    assert {p.name: hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in (demo / "videos").iterdir()} == before

@@ -1,0 +1,513 @@
+"""Multi-view silhouette tracking, thesis section 6.2.5: per frame, the pose whose rendered
+silhouettes best overlap the image silhouettes (the XOR energy of `tracking.energy`).
+
+Per frame, starting from a constant-velocity prediction of the previous two frames:
+
+1. root: the 6 global parameters by downhill simplex (Nelder-Mead), coarse pyramid level first;
+2. "head and hip": the spine and neck bends, by simplex;
+3. each limb's 4 parameters (ball joint + hinge): a regular grid over the two swing angles and
+   the hinge, around the prediction, over a range adapted to the parameter changes of the two
+   preceding frames; only valid samples are scored (thesis: the elbow and wrist, or knee and
+   ankle, project inside the silhouette in every view and lie at least a minimum distance from
+   the torso axis); the best sample is refined by simplex;
+4. a final simplex over the root at the finest level. (The thesis' last step, hands and feet,
+   has no parameters in our 24-parameter model: wrists and ankles are rigid end sites.)
+
+A stage only moves part of the body, so the silhouette of the rest is rendered once per stage
+and each energy evaluation renders only the moving triangles (`_StageEnergy`).
+
+Initialisation (frame 0, and after a lost frame): automatic from the silhouettes. The visual
+hull is carved on a voxel grid around the point where the views' silhouette centroids meet,
+its surface fitted by `tracking.fit.fit_body` (scale and pose), then refined against the
+silhouettes. A pose given by the user replaces this ("model alignment", thesis 6.2.4).
+
+A frame whose energy stays above `max_xor_fraction` of the silhouette area is a divergence: it
+is logged, the tracker re-initialises from the visual hull, and if that fails too the frame is
+reported lost (no joints; never NaN).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.optimize import minimize
+
+from tracking.body import (
+    LOWER_LIMITS,
+    N_POSE_PARAMS,
+    NODE_INDEX,
+    PARAM_INDEX,
+    PARAM_MOVES_NODE,
+    UPPER_LIMITS,
+    BodyModel,
+    BodyShape,
+    Pose,
+    forward_kinematics,
+)
+from tracking.cameras import Camera
+from tracking.energy import SilhouetteEnergy
+from tracking.render import render_views
+
+_ROOT = [PARAM_INDEX[n] for n in ("root_tx", "root_ty", "root_tz", "root_rz", "root_rx",
+                                  "root_ry")]  # fmt: skip
+_TRUNK = [PARAM_INDEX["spine_flex"], PARAM_INDEX["neck_flex"]]
+# Limb: (ball-joint parameters rz, rx, ry, hinge), its two end nodes and the torso clearance
+# as a fraction of the shape's chest half width (arms) or hip half width (legs).
+_LIMBS: dict[str, tuple[list[int], tuple[str, str], str]] = {
+    f"{side}_{limb}": (
+        [PARAM_INDEX[f"{side}_{ball}_{a}"] for a in ("rz", "rx", "ry")]
+        + [PARAM_INDEX[f"{side}_{hinge}_flex"]],
+        (f"{side}_{hinge}", f"{side}_{end}"),
+        limb,
+    )
+    for side in ("l", "r")
+    for limb, ball, hinge, end in (("arm", "shoulder", "elbow", "wrist"),
+                                   ("leg", "hip", "knee", "ankle"))
+}  # fmt: skip
+_MOVES = PARAM_MOVES_NODE
+
+
+# Groups of BodyShape lengths scaled together when the shape is estimated from silhouettes.
+_SHAPE_GROUPS: tuple[tuple[str, ...], ...] = (
+    ("thigh", "shank"),
+    ("pelvis_to_spine",),
+    ("spine_to_neck",),
+    ("neck_to_head_top",),
+    ("upper_arm", "forearm"),
+    ("shoulder_half_width",),
+    ("pelvis_half_width", "trunk_half_depth", "chest_half_width", "head_half_width",
+     "upper_arm_radius", "forearm_radius", "thigh_radius", "shank_radius"),
+)  # fmt: skip
+
+
+def scaled_shape(base: BodyShape, scales: np.ndarray) -> BodyShape:
+    """`base` with each group of `_SHAPE_GROUPS` multiplied by its scale; the height follows
+    the scaled chain of lengths (sole to head top)."""
+    values = {name: getattr(base, name) * float(k)
+              for group, k in zip(_SHAPE_GROUPS, scales, strict=True)
+              for name in group}  # fmt: skip
+    lengths = {**{f: getattr(base, f) for f in ("thigh", "shank", "ankle_height",
+                                                "pelvis_to_spine", "spine_to_neck",
+                                                "neck_to_head_top")}, **values}  # fmt: skip
+    height = sum(lengths[f] for f in ("thigh", "shank", "ankle_height", "pelvis_to_spine",
+                                      "spine_to_neck", "neck_to_head_top"))  # fmt: skip
+    return replace(base, **values, height=height)
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackConfig:
+    levels: int = field(default=3, metadata={"help": "image pyramid levels (1 = full size)"})
+    search_level: int = field(
+        default=1, metadata={"help": "pyramid level of the grid searches (0 = full size)"}
+    )
+    prior_weight: float = field(
+        default=0.02,
+        metadata={"help": "temporal prior: cost of one prior scale of deviation from the "
+                  "predicted pose, as a fraction of the silhouette area (0 = pure XOR)"},
+    )  # fmt: skip
+    prior_scale_deg: float = field(default=10.0, metadata={"help": "prior scale of angles"})
+    prior_scale_m: float = field(default=0.05, metadata={"help": "prior scale of positions"})
+    final_level: int = field(
+        default=0, metadata={"help": "pyramid level of the last root refinement of a frame"}
+    )
+    grid: int = field(
+        default=3, metadata={"help": "grid samples per limb parameter (swing, lift, hinge)"}
+    )
+    min_range_deg: float = field(
+        default=8.0, metadata={"help": "smallest half-range of a limb grid, degrees"}
+    )
+    max_range_deg: float = field(
+        default=40.0, metadata={"help": "largest half-range of a limb grid, degrees"}
+    )
+    range_gain: float = field(
+        default=2.0,
+        metadata={"help": "grid half-range = gain x the parameter's change over the two "
+                  "preceding frames (thesis 6.2.5), clipped to the min/max range"},
+    )  # fmt: skip
+    simplex_evals: int = field(
+        default=40, metadata={"help": "evaluations of each downhill-simplex refinement"}
+    )
+    max_xor_fraction: float = field(
+        default=0.35,
+        metadata={"help": "a frame whose XOR area exceeds this fraction of the silhouette "
+                  "area is a divergence: re-initialise"},
+    )  # fmt: skip
+    init_rounds: int = field(
+        default=3,
+        metadata={"help": "rounds of (pose refinement, height choice) at initialisation"},
+    )
+    init_simplex_evals: int = field(
+        default=120, metadata={"help": "evaluations of each simplex at initialisation"}
+    )
+    voxel_m: float = field(default=0.03, metadata={"help": "visual-hull voxel size, metres"})
+    hull_size_m: float = field(
+        default=2.6, metadata={"help": "side of the visual-hull cube around the subject, metres"}
+    )
+    renderer: str = field(
+        default="cpu-raster", metadata={"help": "silhouette renderer plugin (mocap plugins)"}
+    )
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """One tracked frame: pose or None when lost; energy in full-resolution XOR pixels."""
+
+    frame: int
+    pose: Pose | None
+    energy: float
+    silhouette_area: float
+    evaluations: int
+    seconds: float
+    event: str = ""  # "init", "reinit", "lost: ..." or ""
+
+    @property
+    def xor_fraction(self) -> float:
+        return self.energy / max(self.silhouette_area, 1.0)
+
+
+class _StageEnergy:
+    """Energy of a pose in which only the parameters `free` change (the rest held at `base`):
+    the silhouette of the triangles they do not move is rendered once. `prior`: (centre,
+    weight) per parameter, adding sum weight (x - centre)^2 XOR pixels (the temporal prior)."""
+
+    def __init__(self, energy: SilhouetteEnergy, base: np.ndarray, free: Sequence[int],
+                 level: int, prior: tuple[np.ndarray, np.ndarray] | None = None,
+                 ) -> None:  # fmt: skip
+        self.energy, self.level = energy, level
+        self.prior = prior
+        self.base = base.copy()
+        self.free = np.asarray(free)
+        model = energy.model
+        moved_nodes = _MOVES[self.free].any(axis=0)
+        moving = moved_nodes[model.node_of_segment[model.segment_of_face]]
+        self.faces = model.faces[moving]
+        self.cameras = energy.cameras[level]
+        self.masks = energy.masks[level]
+        static_faces = model.faces[~moving]
+        vertices = model.posed_vertices(Pose(self.base))
+        self.static = (
+            render_views(energy.renderer, vertices, static_faces, self.cameras)
+            if len(static_faces)
+            else [np.zeros((cam.height, cam.width), bool) for cam in self.cameras]
+        )
+        self.pixel_area = energy._pixel_area[level]
+        self.evaluations = 0
+
+    def params(self, values: np.ndarray) -> np.ndarray:
+        x = self.base.copy()
+        x[self.free] = values
+        return np.clip(x, LOWER_LIMITS, UPPER_LIMITS)
+
+    def __call__(self, values: np.ndarray) -> float:
+        self.evaluations += 1
+        vertices = self.energy.model.posed_vertices(Pose(self.params(values)))
+        moving = render_views(self.energy.renderer, vertices, self.faces, self.cameras)
+        total = 0.0
+        if self.prior is not None:
+            centre, weight = self.prior
+            x = self.params(values)
+            total += float(np.sum(weight[self.free] * (x[self.free] - centre[self.free]) ** 2))
+        for static, part, mask, area in zip(self.static, moving, self.masks, self.pixel_area,
+                                            strict=True):  # fmt: skip
+            total += area * np.count_nonzero((static | part) ^ mask)
+        return total
+
+
+def _simplex(fun: Callable[[np.ndarray], float], x0: np.ndarray, steps: np.ndarray,
+             lo: np.ndarray, hi: np.ndarray, evals: int) -> np.ndarray:  # fmt: skip
+    """Downhill simplex (Nelder-Mead) from x0 with initial edge lengths `steps`, in bounds."""
+    x0 = np.clip(x0, lo, hi)
+    simplex = np.vstack([x0, x0 + np.diag(steps)])
+    # Keep the initial simplex inside the bounds by stepping the other way where needed.
+    over = simplex[1:] > hi
+    simplex[1:][over] = (x0[None, :] - np.diag(steps))[over]
+    simplex = np.clip(simplex, lo, hi)
+    result = minimize(fun, x0, method="Nelder-Mead", bounds=list(zip(lo, hi, strict=True)),
+                      options={"initial_simplex": simplex, "maxfev": evals, "xatol": 1e-4,
+                               "fatol": 0.5})  # fmt: skip
+    return result.x
+
+
+class SilhouetteTracker:
+    """Tracks one subject through a sequence of multi-view silhouettes (see module docstring).
+
+    cameras: the calibrated views; shape: the subject's scale parameters (fixed, thesis 6.2.4),
+    or None to estimate them at initialisation.
+    """
+
+    def __init__(self, cameras: Sequence[Camera], config: TrackConfig | None = None,
+                 shape: BodyShape | None = None) -> None:  # fmt: skip
+        from plugins.registry import create
+
+        self.cameras = list(cameras)
+        self.config = config or TrackConfig()
+        self.renderer = create("renderer", self.config.renderer)
+        self.shape = shape
+        self.model = BodyModel(shape) if shape is not None else None
+        self.history: list[np.ndarray] = []  # params of the last tracked frames
+        self.evaluations = 0
+
+    # -- initialisation -------------------------------------------------------------------
+    def visual_hull_points(self, masks: Sequence[np.ndarray]) -> np.ndarray:
+        """(N, 3) centres of the visual hull's surface voxels, world frame."""
+        centre = _rays_meeting_point(self.cameras, masks)
+        step = self.config.voxel_m
+        n = int(np.ceil(self.config.hull_size_m / step))
+        axis = (np.arange(n) - (n - 1) / 2) * step
+        grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3) + centre
+        inside = np.ones(len(grid), bool)
+        for cam, mask in zip(self.cameras, masks, strict=True):
+            uv, depth = cam.project(grid)
+            with np.errstate(invalid="ignore"):
+                col, row = np.floor(uv[:, 0]).astype(int), np.floor(uv[:, 1]).astype(int)
+            ok = (depth > 0) & (col >= 0) & (col < cam.width) & (row >= 0) & (row < cam.height)
+            hit = np.zeros(len(grid), bool)
+            hit[ok] = mask[row[ok], col[ok]]
+            inside &= hit
+        occupied = inside.reshape(n, n, n)
+        # Surface voxels: occupied with at least one empty 6-neighbour.
+        padded = np.pad(occupied, 1)
+        interior = occupied.copy()
+        for axis_k in range(3):
+            for shift in (-1, 1):
+                interior &= np.roll(padded, shift, axis=axis_k)[1:-1, 1:-1, 1:-1]
+        return grid[(occupied & ~interior).ravel()]
+
+    def initialise(self, masks: Sequence[np.ndarray], init: Pose | None = None) -> tuple[Pose, str]:
+        """The first pose: `init` if given, else a body fitted to the visual hull, then refined
+        against the silhouettes. Sets the shape when it was unknown."""
+        from tracking.fit import FitConfig, fit_body
+
+        if init is None:
+            points = self.visual_hull_points(masks)
+            if len(points) < 100:
+                raise TrackingLost("the silhouettes do not intersect in a visual hull")
+            fit = fit_body(points, FitConfig(min_inlier_fraction=0.0, max_median_residual=1.0))
+            init = fit.pose
+            if self.shape is None:
+                # Few views carve a hull larger than the body, and people differ in
+                # proportions: alternately refine the pose and the segment lengths against the
+                # silhouettes (the scale parameters, fixed afterwards: thesis 6.2.4).
+                base = BodyShape.default(fit.shape.height)
+                scales = np.ones(len(_SHAPE_GROUPS))
+                self.shape = base
+                self.model = BodyModel(base)
+                for _ in range(self.config.init_rounds):
+                    init = Pose(self._refine_all(self._energy(masks), init.params, init=True))
+                    scales, init = self._refine_shape(masks, base, scales, init)
+            message = f"init from visual hull ({len(points)} surface voxels)"
+        else:
+            if self.shape is None:
+                raise ValueError("an initial pose needs the subject's shape")
+            message = "init from the given pose"
+        self.history = []
+        x = self._refine_all(self._energy(masks), init.params.copy(), init=True)
+        return Pose(x), message
+
+    def _refine_shape(self, masks: Sequence[np.ndarray], base: BodyShape, scales: np.ndarray,
+                      pose: Pose) -> tuple[np.ndarray, Pose]:  # fmt: skip
+        """Segment-length scales and the root, by simplex on the silhouette energy."""
+        level = self.config.search_level
+        n = len(scales)
+
+        def energy_of(values: np.ndarray) -> float:
+            shape = scaled_shape(base, values[:n])
+            energy = SilhouetteEnergy(BodyModel(shape), self.cameras, masks, self.renderer,
+                                      levels=level + 1)  # fmt: skip
+            x = pose.params.copy()
+            x[_ROOT] = values[n:]
+            return energy(Pose(np.clip(x, LOWER_LIMITS, UPPER_LIMITS)), level)
+
+        start = np.concatenate([scales, pose.params[_ROOT]])
+        steps = np.concatenate([np.full(n, 0.05), [0.03] * 3, [0.05] * 3])
+        lo = np.concatenate([np.full(n, 0.75), LOWER_LIMITS[_ROOT]])
+        hi = np.concatenate([np.full(n, 1.3), UPPER_LIMITS[_ROOT]])
+        values = _simplex(energy_of, start, steps, lo, hi, self.config.init_simplex_evals * 2)
+        self.shape = scaled_shape(base, values[:n])
+        self.model = BodyModel(self.shape)
+        x = pose.params.copy()
+        x[_ROOT] = values[n:]
+        return values[:n], Pose(np.clip(x, LOWER_LIMITS, UPPER_LIMITS))
+
+    # -- tracking -------------------------------------------------------------------------
+    def _energy(self, masks: Sequence[np.ndarray]) -> SilhouetteEnergy:
+        assert self.model is not None
+        return SilhouetteEnergy(self.model, self.cameras, masks, self.renderer,
+                                levels=self.config.levels)  # fmt: skip
+
+    def _prediction(self) -> tuple[np.ndarray, np.ndarray]:
+        """Constant-velocity prediction and the per-parameter change of the last two frames."""
+        if len(self.history) >= 2:
+            change = self.history[-1] - self.history[-2]
+            return np.clip(self.history[-1] + change, LOWER_LIMITS, UPPER_LIMITS), np.abs(change)
+        return self.history[-1].copy(), np.zeros(N_POSE_PARAMS)
+
+    def _stage(self, energy: SilhouetteEnergy, x: np.ndarray, free: Sequence[int],
+               steps: np.ndarray, level: int, evals: int | None = None) -> np.ndarray:  # fmt: skip
+        stage = _StageEnergy(energy, x, free, level, self._prior)
+        free = list(free)
+        values = _simplex(stage, x[free], steps, LOWER_LIMITS[free], UPPER_LIMITS[free],
+                          evals or self.config.simplex_evals)  # fmt: skip
+        self.evaluations += stage.evaluations
+        return stage.params(values)
+
+    def _limb(self, energy: SilhouetteEnergy, x: np.ndarray, limb: str, change: np.ndarray,
+              level: int, wide: bool) -> np.ndarray:  # fmt: skip
+        params, ends, kind = _LIMBS[limb]
+        cfg = self.config
+        stage = _StageEnergy(energy, x, params, level, self._prior)
+        half = np.clip(cfg.range_gain * change[params], np.deg2rad(cfg.min_range_deg),
+                       np.deg2rad(cfg.max_range_deg))  # fmt: skip
+        if wide:
+            half[:] = np.deg2rad(cfg.max_range_deg)
+        # Grid over abduction, flexion and the hinge; the axial twist is left to the simplex.
+        offsets = np.linspace(-1, 1, cfg.grid) if cfg.grid > 1 else np.zeros(1)
+        grid_axes = [0, 1, 3]
+        mesh = np.stack(np.meshgrid(*[offsets] * 3, indexing="ij"), -1).reshape(-1, 3)
+        samples = np.repeat(x[params][None], len(mesh), axis=0)
+        samples[:, grid_axes] += mesh * half[grid_axes]
+        samples = np.clip(samples, LOWER_LIMITS[params], UPPER_LIMITS[params])
+        best, best_e = x[params], stage(x[params])
+        for values in samples:
+            if not self._valid(stage.params(values), ends, kind, energy, level):
+                continue
+            e = stage(values)
+            if e < best_e:
+                best, best_e = values, e
+        steps = np.maximum(half / max(cfg.grid - 1, 1), np.deg2rad(3.0))
+        values = _simplex(stage, best, steps, LOWER_LIMITS[params], UPPER_LIMITS[params],
+                          cfg.init_simplex_evals if wide else cfg.simplex_evals)  # fmt: skip
+        self.evaluations += stage.evaluations
+        return stage.params(values)
+
+    def _valid(self, x: np.ndarray, ends: tuple[str, str], kind: str,
+               energy: SilhouetteEnergy, level: int) -> bool:  # fmt: skip
+        """Thesis 6.2.5's sample test: the limb's two end nodes lie inside the (dilated)
+        silhouette in every view and away from the torso axis."""
+        assert self.shape is not None
+        world = forward_kinematics(Pose(x), self.shape)
+        pelvis, neck = world[NODE_INDEX["pelvis"], :3, 3], world[NODE_INDEX["neck"], :3, 3]
+        axis = (neck - pelvis) / max(np.linalg.norm(neck - pelvis), 1e-9)
+        clearance = (0.5 * self.shape.chest_half_width if kind == "arm"
+                     else 0.3 * self.shape.hip_half_width)  # fmt: skip
+        points = np.array([world[NODE_INDEX[n], :3, 3] for n in ends])
+        off_axis = points - pelvis - np.outer((points - pelvis) @ axis, axis)
+        if np.any(np.linalg.norm(off_axis, axis=1) < clearance):
+            return False
+        for cam, mask in zip(energy.cameras[level], self._dilated[level], strict=True):
+            uv, depth = cam.project(points)
+            col, row = np.floor(uv[:, 0]), np.floor(uv[:, 1])
+            if np.any(~np.isfinite(col)) or np.any(depth <= 0):
+                return False
+            col, row = col.astype(int), row.astype(int)
+            inside = (col >= 0) & (col < cam.width) & (row >= 0) & (row < cam.height)
+            if not inside.all() or not mask[row, col].all():
+                return False
+        return True
+
+    def _refine_all(self, energy: SilhouetteEnergy, x: np.ndarray, init: bool = False,
+                    change: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+        """Root, trunk, limbs, root again: the hierarchy of thesis 6.2.5."""
+        import cv2
+
+        cfg = self.config
+        self._dilated = [
+            [cv2.dilate(m.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+             for m in level_masks]
+            for level_masks in energy.masks
+        ]  # fmt: skip
+        coarse = min(cfg.levels - 1, cfg.search_level + 1)
+        # Temporal prior (thesis: "prediction"): a deviation of one `prior_scale` from the
+        # predicted pose costs `prior_weight` of the silhouette area, in XOR pixels.
+        area = float(sum(np.count_nonzero(m) for m in energy.masks[0]))
+        scale = np.where(np.arange(N_POSE_PARAMS) < 3, cfg.prior_scale_m,
+                         np.deg2rad(cfg.prior_scale_deg))  # fmt: skip
+        if init:
+            centre, weight = np.zeros(N_POSE_PARAMS), np.zeros(N_POSE_PARAMS)
+        else:
+            centre, weight = x.copy(), cfg.prior_weight * area / scale**2
+        self._prior = (centre, weight)
+        if init or change is None:
+            change = np.zeros(N_POSE_PARAMS)
+            root_steps = np.array([0.05, 0.05, 0.05, 0.08, 0.08, 0.15])
+        else:
+            # The simplex starts as large as the last frame-to-frame change, within limits.
+            root_steps = np.clip(1.5 * change[_ROOT], [0.01] * 3 + [0.02] * 3,
+                                 [0.08] * 3 + [0.15] * 3)  # fmt: skip
+        evals = cfg.init_simplex_evals if init else cfg.simplex_evals
+        for level in sorted({coarse, cfg.search_level}, reverse=True):
+            x = self._stage(energy, x, _ROOT, root_steps, level, evals)
+            root_steps = root_steps / 2
+        x = self._stage(energy, x, _TRUNK, np.deg2rad([8.0, 8.0]), cfg.search_level, evals)
+        for limb in _LIMBS:
+            x = self._limb(energy, x, limb, change, cfg.search_level, wide=init)
+        x = self._stage(energy, x, _ROOT, root_steps / 2, cfg.final_level, evals)
+        return x
+
+    def track(self, frame: int, masks: Sequence[np.ndarray], init: Pose | None = None
+              ) -> FrameResult:  # fmt: skip
+        """Track one frame; masks: one (H, W) bool silhouette per camera."""
+        start = time.perf_counter()
+        self.evaluations = 0
+        area = float(sum(np.count_nonzero(m) for m in masks))
+        empty = [c.name for c, m in zip(self.cameras, masks, strict=True) if not m.any()]
+        if empty:
+            self.history = []
+            return FrameResult(frame, None, float("nan"), area, 0, time.perf_counter() - start,
+                               f"lost: empty silhouette in {', '.join(empty)}")  # fmt: skip
+        event = ""
+        try:
+            if not self.history:
+                pose, event = self.initialise(masks, init)
+                x = pose.params
+            else:
+                energy = self._energy(masks)
+                predicted, change = self._prediction()
+                x = self._refine_all(energy, predicted, change=change)
+            energy = self._energy(masks)
+            e = energy(Pose(x))
+            if e > self.config.max_xor_fraction * area and event == "":
+                # Divergence: start again from the visual hull.
+                pose, _ = self.initialise(masks)
+                x2 = pose.params
+                e2 = energy(Pose(x2))
+                event = f"reinit (XOR {e / area:.0%} of the silhouette)"
+                if e2 < e:
+                    x, e = x2, e2
+            if e > self.config.max_xor_fraction * area:
+                self.history = []
+                return FrameResult(frame, None, e, area, self.evaluations,
+                                   time.perf_counter() - start,
+                                   f"lost: XOR {e / area:.0%} of the silhouette area")  # fmt: skip
+        except TrackingLost as exc:
+            self.history = []
+            return FrameResult(frame, None, float("nan"), area, self.evaluations,
+                               time.perf_counter() - start, f"lost: {exc}")  # fmt: skip
+        self.history = [*self.history[-1:], x]
+        return FrameResult(frame, Pose(x), e, area, self.evaluations,
+                           time.perf_counter() - start, event)  # fmt: skip
+
+
+class TrackingLost(Exception):
+    """The subject cannot be found in this frame."""
+
+
+def _rays_meeting_point(cameras: Sequence[Camera], masks: Sequence[np.ndarray]) -> np.ndarray:
+    """Least-squares meeting point of the rays through every view's silhouette centroid."""
+    a, b = np.zeros((3, 3)), np.zeros(3)
+    for cam, mask in zip(cameras, masks, strict=True):
+        rows, cols = np.nonzero(mask)
+        if len(rows) == 0:
+            raise TrackingLost(f"empty silhouette in {cam.name}")
+        # Pixel centres are at +0.5 (the convention of `tracking.cameras`).
+        pixel = np.array([cols.mean() + 0.5, rows.mean() + 0.5, 1.0])
+        xy = cam.undistort((np.linalg.solve(cam.K, pixel)[:2])[None])  # normalised
+        direction = cam.R.T @ np.array([xy[0, 0], xy[0, 1], 1.0])
+        direction /= np.linalg.norm(direction)
+        proj = np.eye(3) - np.outer(direction, direction)
+        a += proj
+        b += proj @ cam.center_in_world
+    return np.linalg.solve(a, b)
