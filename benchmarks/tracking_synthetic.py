@@ -77,9 +77,11 @@ def _renderer_speeds(ws: Path) -> None:
                 energy(pose, level)
                 n += 1
             rates[(name, level)] = n / (time.perf_counter() - start)
+    reference = rates[("open3d-raycast", 0)]
+    for name in dict.fromkeys(n for n, _ in rates):
         print(f"  {name:16s} level 0: {rates[(name, 0)]:6.1f}/s  level 1: "
-              f"{rates[(name, 1)]:6.1f}/s  ratio to open3d-raycast (level 0): "
-              f"{rates[(name, 0)] / rates.get(('open3d-raycast', 0), rates[(name, 0)]):.2f}")
+              f"{rates[(name, 1)]:6.1f}/s  speed vs open3d-raycast (level 0): "
+              f"{rates[(name, 0)] / reference:.2f}")
 
 
 def main() -> None:
