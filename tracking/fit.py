@@ -460,8 +460,13 @@ def check_cloud(points: np.ndarray) -> np.ndarray:
     return points
 
 
-def fit_body(points: np.ndarray, config: FitConfig | None = None) -> FitResult:
-    """Fit scale and pose to `points` (N, 3); see the module docstring for the method."""
+def fit_body(points: np.ndarray, config: FitConfig | None = None,
+             up: np.ndarray | None = None) -> FitResult:  # fmt: skip
+    """Fit scale and pose to `points` (N, 3); see the module docstring for the method.
+
+    up: (3,) the world's up direction when known (e.g. from a camera rig): only orientations
+    whose body axis lies within 60 degrees of it are tried.
+    """
     config = config or FitConfig()
     start = time.perf_counter()
     points = check_cloud(points)
@@ -471,6 +476,9 @@ def fit_body(points: np.ndarray, config: FitConfig | None = None) -> FitResult:
     coarse = points[rng.choice(len(points), min(400, len(points)), replace=False)]
     surface = _surface()
     rotations, extent = _orientation_candidates(points, config.headings)
+    if up is not None:
+        up = np.asarray(up, dtype=float) / np.linalg.norm(up)
+        rotations = [r for r in rotations if r[:, 1] @ up > 0.5] or rotations
     if not extent > 0:
         raise ValueError("the point cloud has no extent")
     # The extent along the body axis is the height standing, less when crouching, more with

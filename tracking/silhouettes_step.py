@@ -26,9 +26,13 @@ warnings, printed by the CLI. All masks go to ``silhouettes.partial/`` first, wh
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import dataclasses
 import re
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import cv2
@@ -215,41 +219,35 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
               if config.logged_frames else set())
     per_camera: dict[str, dict[str, Any]] = {}
     warnings: list[str] = []
+    map_cameras = _camera_map.get()
     with (Timer() as timer, bar(len(frames) * len(cameras), "silhouettes", "frame") as progress,
           atomic_output(ws.silhouettes_dir) as tmp,
           recording.step_recording(ws.log_path(STEP), STEP) as rec):
         tmp.mkdir()
         recording.log_silhouette_context(rec, "world/cameras")
-        for camera in cameras:
-            progress.set_postfix_str(f"{camera.name}: background")
-            model = _background(ws, camera, background_frames, median=span is None)
+        jobs = [_CameraJob(root=ws.root.resolve(), camera=camera, frames=frames,
+                           background_frames=background_frames, median=span is None,
+                           thresholds=config.thresholds, out=tmp.resolve() / camera.name,
+                           logged=frozenset(logged)) for camera in cameras]
+        if map_cameras is not None:
+            done_cameras = map_cameras(camera_silhouettes, jobs)
+        else:  # one camera after the other in this process, logged as each one finishes
+            done_cameras = (camera_silhouettes(job, progress) for job in jobs)
+        for camera, result in zip(cameras, done_cameras, strict=True):
             entity = f"world/cameras/{recording.entity_name(camera.name)}"
             recording.log_camera_image(rec, image_name=camera.name, image_path=None, K=camera.K,
                                        width=camera.width, height=camera.height,
                                        cam_from_world=camera.cam_from_world)
             recording.log_frame_image(rec, f"backgrounds/{recording.entity_name(camera.name)}",
-                                      np.clip(model.mean, 0, 255).astype(np.uint8))
-            progress.set_postfix_str(camera.name)
-            out = tmp / camera.name
-            out.mkdir()
-            box = content_box(ws, camera)
-            fractions, empty, border = [], [], []
-            for index, frame in read_frames(ws, camera.name, frames):
-                mask = silhouette_from_frame(frame, model, config.thresholds)
-                if not cv2.imwrite(str(out / f"{index:06d}.png"), mask.astype(np.uint8) * 255):
-                    raise UserError(f"could not write {out / f'{index:06d}.png'}")
-                fraction = float(mask.mean())
-                fractions.append(fraction)
-                if fraction == 0.0:
-                    empty.append(index)
-                elif _touches_border(mask, box):
-                    border.append(index)
-                if index in logged:
-                    time_s = index / fps[camera.name] if fps[camera.name] else None
-                    recording.log_frame_image(rec, f"{entity}/image", frame, index, time_s)
-                    recording.log_silhouette(rec, f"{entity}/image/silhouette", mask, index,
-                                             time_s or 0.0)
-                progress.update()
+                                      result.background)
+            for index, frame, mask in result.logged:
+                time_s = index / fps[camera.name] if fps[camera.name] else None
+                recording.log_frame_image(rec, f"{entity}/image", frame, index, time_s)
+                recording.log_silhouette(rec, f"{entity}/image/silhouette", mask, index,
+                                         time_s or 0.0)
+            if map_cameras is not None:
+                progress.update(len(frames))
+            fractions, empty, border = result.fractions, result.empty, result.border
             rate = fps[camera.name] or 1.0
             recording.log_frame_series(rec, f"silhouettes/{recording.entity_name(camera.name)}"
                                        "/foreground_fraction", np.asarray(frames),
@@ -270,6 +268,89 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
                "processed": len(frames), "background": background_text,
                "background_frames": background_frames, "warnings": warnings}
     return ws.record_step(STEP, fp, config=settings, seconds=timer.seconds, summary=summary)
+
+
+CameraMap = Callable[..., list[Any]]
+"""``map_fn(fn, items)`` returning ``[fn(item) for item in items]`` in input order, however it
+runs them (:func:`recon.batch.map_ordered` runs them as Dask tasks)."""
+
+# Unset (None) in a plain run: the cameras are processed one after another in this process.
+_camera_map: contextvars.ContextVar[CameraMap | None] = contextvars.ContextVar(
+    "silhouette_camera_map", default=None)
+
+
+@contextlib.contextmanager
+def cameras_mapped_by(map_fn: CameraMap) -> Iterator[None]:
+    """Within this block, :func:`make_silhouettes` hands each camera's work (background model,
+    decoding, classification, writing its masks into the partial folder) to ``map_fn``.
+
+    Like :func:`recon.backends.stereo_pairs_mapped_by`: how the cameras are scheduled changes
+    no output; the masks still replace ``silhouettes/`` only when every camera is done.
+    """
+    token = _camera_map.set(map_fn)
+    try:
+        yield
+    finally:
+        _camera_map.reset(token)
+
+
+@dataclass(frozen=True)
+class _CameraJob:
+    """One camera's share of :func:`make_silhouettes`; small and picklable."""
+
+    root: Path
+    camera: Camera
+    frames: list[int]
+    background_frames: list[int]
+    median: bool
+    thresholds: SilhouetteConfig
+    out: Path
+    logged: frozenset[int]
+
+
+@dataclass(frozen=True)
+class _CameraResult:
+    background: np.ndarray
+    """The background model's mean, uint8, as logged."""
+    fractions: list[float]
+    empty: list[int]
+    border: list[int]
+    logged: list[tuple[int, np.ndarray, np.ndarray]]
+    """(frame index, frame, mask) of the frames to log."""
+
+
+def camera_silhouettes(job: _CameraJob, progress: Any = None) -> _CameraResult:
+    """The masks of one camera's frames written to ``job.out``: one independent task."""
+    ws = Workspace(job.root)
+    camera = job.camera
+    if progress is not None:
+        progress.set_postfix_str(f"{camera.name}: background")
+    model = _background(ws, camera, job.background_frames, median=job.median)
+    if progress is not None:
+        progress.set_postfix_str(camera.name)
+    out = job.out
+    out.mkdir()
+    box = content_box(ws, camera)
+    fractions: list[float] = []
+    empty: list[int] = []
+    border: list[int] = []
+    logged = []
+    for index, frame in read_frames(ws, camera.name, job.frames):
+        mask = silhouette_from_frame(frame, model, job.thresholds)
+        if not cv2.imwrite(str(out / f"{index:06d}.png"), mask.astype(np.uint8) * 255):
+            raise UserError(f"could not write {out / f'{index:06d}.png'}")
+        fraction = float(mask.mean())
+        fractions.append(fraction)
+        if fraction == 0.0:
+            empty.append(index)
+        elif _touches_border(mask, box):
+            border.append(index)
+        if index in job.logged:
+            logged.append((index, frame, mask))
+        if progress is not None:
+            progress.update()
+    return _CameraResult(np.clip(model.mean, 0, 255).astype(np.uint8), fractions, empty,
+                         border, logged)
 
 
 def _background(ws: Workspace, camera: Camera, indexes: list[int], *, median: bool

@@ -68,6 +68,8 @@ _LIMBS: dict[str, tuple[list[int], tuple[str, str], str]] = {
                                    ("leg", "hip", "knee", "ankle"))
 }  # fmt: skip
 _MOVES = PARAM_MOVES_NODE
+_TWISTS = [PARAM_INDEX[f"{side}_{joint}_ry"] for side in ("l", "r")
+           for joint in ("shoulder", "hip")]  # fmt: skip
 
 
 # Groups of BodyShape lengths scaled together when the shape is estimated from silhouettes.
@@ -110,6 +112,15 @@ class TrackConfig:
     )  # fmt: skip
     prior_scale_deg: float = field(default=10.0, metadata={"help": "prior scale of angles"})
     prior_scale_m: float = field(default=0.05, metadata={"help": "prior scale of positions"})
+    twist_weight: float = field(
+        default=0.01,
+        metadata={"help": "cost of one twist scale of limb twist (shoulders, hips), as a "
+                  "fraction of the silhouette area (0 = none)"},
+    )  # fmt: skip
+    twist_scale_deg: float = field(default=30.0, metadata={"help": "twist prior scale"})
+    passes: int = field(
+        default=1, metadata={"help": "passes of the whole hierarchy per frame"}
+    )
     final_level: int = field(
         default=0, metadata={"help": "pyramid level of the last root refinement of a frame"}
     )
@@ -285,7 +296,8 @@ class SilhouetteTracker:
             points = self.visual_hull_points(masks)
             if len(points) < 100:
                 raise TrackingLost("the silhouettes do not intersect in a visual hull")
-            fit = fit_body(points, FitConfig(min_inlier_fraction=0.0, max_median_residual=1.0))
+            fit = fit_body(points, FitConfig(min_inlier_fraction=0.0, max_median_residual=1.0),
+                           up=_rig_up(self.cameras, points.mean(axis=0)))
             init = fit.pose
             if self.shape is None:
                 # Few views carve a hull larger than the body, and people differ in
@@ -429,6 +441,11 @@ class SilhouetteTracker:
             centre, weight = np.zeros(N_POSE_PARAMS), np.zeros(N_POSE_PARAMS)
         else:
             centre, weight = x.copy(), cfg.prior_weight * area / scale**2
+        # A limb's axial twist barely changes its silhouette (limbs are nearly round), so
+        # without a pull it drifts and other joints compensate: pull twists weakly to 0.
+        twist = cfg.twist_weight * area / np.deg2rad(cfg.twist_scale_deg) ** 2
+        centre[_TWISTS] = weight[_TWISTS] * centre[_TWISTS] / (weight[_TWISTS] + twist)
+        weight[_TWISTS] = weight[_TWISTS] + twist
         self._prior = (centre, weight)
         if init or change is None:
             change = np.zeros(N_POSE_PARAMS)
@@ -467,6 +484,9 @@ class SilhouetteTracker:
                 energy = self._energy(masks)
                 predicted, change = self._prediction()
                 x = self._refine_all(energy, predicted, change=change)
+                for _ in range(self.config.passes - 1):
+                    # Another pass from the result, with the ranges of a small change.
+                    x = self._refine_all(energy, x, change=np.abs(x - predicted) / 2)
             energy = self._energy(masks)
             e = energy(Pose(x))
             if e > self.config.max_xor_fraction * area and event == "":
@@ -493,6 +513,22 @@ class SilhouetteTracker:
 
 class TrackingLost(Exception):
     """The subject cannot be found in this frame."""
+
+
+def _rig_up(cameras: Sequence[Camera], subject_in_world: np.ndarray) -> np.ndarray | None:
+    """The world's up direction as a camera rig shows it: the normal of the plane through the
+    camera centres, towards the cameras (mounted above the subject's middle, around it).
+    None when the rig gives no such hint (fewer than 3 cameras, or cameras level with it)."""
+    centres = np.array([c.center_in_world for c in cameras])
+    if len(centres) < 3:
+        return None
+    mean = centres.mean(axis=0)
+    normal = np.linalg.svd(centres - mean)[2][-1]
+    height = (mean - subject_in_world) @ normal
+    spread = np.linalg.norm(centres - mean, axis=1).mean()
+    if abs(height) < 0.05 * spread:
+        return None
+    return normal * np.sign(height)
 
 
 def _rays_meeting_point(cameras: Sequence[Camera], masks: Sequence[np.ndarray]) -> np.ndarray:

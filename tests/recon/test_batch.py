@@ -14,6 +14,7 @@ import json
 import time
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pycolmap
 import pytest
@@ -34,7 +35,9 @@ from recon.mvs import DenseConfig, MeshConfig
 from recon.sfm import SfMConfig, cams_from_world
 from recon.synthetic import SyntheticSceneConfig, render_scene, write_scene
 from recon.workspace import Workspace
-from tests.helpers import run_cli
+from tests.helpers import run_cli, shared_dataset
+from tracking.synth import SynthConfig, synthesize
+from tracking.tracker import TrackConfig
 
 SFM = SfMConfig(num_threads=1, seed=0, max_image_size=320, max_num_features=2000)
 DENSE = DenseConfig(dense_max_image_size=320, num_threads=1)
@@ -187,14 +190,17 @@ def test_silhouettes_in_parallel_equal_frame_by_frame(cluster):
 
 def test_steps_and_bad_input():
     assert parse_steps("mesh, sfm") == (BatchStep.SFM, BatchStep.MESH)
-    with pytest.raises(UserError, match="choose from sfm, dense, mesh"):
-        parse_steps("sfm,track")
+    assert parse_steps("track,silhouettes") == (BatchStep.SILHOUETTES, BatchStep.TRACK)
+    assert parse_steps(None) is None
+    with pytest.raises(UserError, match="choose from sfm, dense, mesh, silhouettes, track"):
+        parse_steps("sfm,fly")
     with pytest.raises(UserError, match="given twice"):
         run_batch(["ws", "./ws"], BatchConfig(scheduler="tcp://127.0.0.1:1"))
     result = run_cli("batch", "ws", "--steps", "sfm,fly")
     assert result.returncode == 2
     assert result.stderr.strip() == (
-        "mocap batch: error: --steps 'sfm,fly': choose from sfm, dense, mesh (comma-separated)")
+        "mocap batch: error: --steps 'sfm,fly': choose from sfm, dense, mesh, silhouettes, "
+        "track (comma-separated)")
     result = run_cli("batch", "ws", "--scheduler", "/nonexistent/scheduler.json")
     assert result.returncode == 2
     assert result.stderr.strip().endswith("no such scheduler file")
@@ -205,6 +211,77 @@ def test_serial_run_skips_the_steps_after_a_failure(tmp_path):
     assert [s.step for s in result.steps] == [BatchStep.DENSE, BatchStep.MESH]
     assert [s.status for s in result.steps] == [StepStatus.FAILED, StepStatus.SKIPPED]
     assert isinstance(BatchReport((result,), 0.0).lines()[0], str)
+
+
+# Video workspaces ---------------------------------------------------------------------------
+TRACK = TrackConfig(init_rounds=1, init_simplex_evals=40)  # small budgets: ~10 s a sequence
+
+
+@pytest.mark.slow
+def test_tracking_sequences_on_dask_equal_a_serial_run(cluster, tmp_path):
+    """Two synthetic sequences as parallel Dask chains (one tracking task each) against serial
+    runs: the same tracks. Their silhouettes are given, so that step is skipped, not failed."""
+    from distributed import Client, get_task_stream
+
+    walk = shared_dataset("mocap_bvh") / "cmu_02_01_walk.bvh"
+    for fov in (50, 55):  # two sequences, as from two camera set-ups
+        for kind in ("serial", "dask"):
+            synthesize(tmp_path / f"{kind}{fov}", SynthConfig(
+                bvh=walk, frames=3, cameras=3, size="160x120", fov_deg=fov, clean=True))
+    serial = [run_workspace(tmp_path / f"serial{fov}", track=TRACK) for fov in (50, 55)]
+    with Client(cluster) as client, get_task_stream(client) as stream:
+        report = run_batch([tmp_path / "dask50", tmp_path / "dask55"],
+                           BatchConfig(scheduler=cluster.scheduler_address), track=TRACK)
+    for result in (*serial, *report.results):
+        assert result.ok, result.line()
+        assert [(s.step, s.status, s.reason) for s in result.steps] == [
+            (BatchStep.SILHOUETTES, StepStatus.SKIPPED, "silhouettes given (synthetic)"),
+            (BatchStep.TRACK, StepStatus.DONE, None)]
+        assert "silhouettes skipped (silhouettes given (synthetic))" in result.line()
+    for fov in (50, 55):
+        a, b = (tmp_path / f"{kind}{fov}" / "tracks" for kind in ("serial", "dask"))
+        pose_a, pose_b = (json.loads((t / "pose.json").read_text()) for t in (a, b))
+        assert len(pose_a["frames"]) == 3 and pose_a["frames"][0]["params"] is not None
+        assert [f["params"] for f in pose_a["frames"]] == [f["params"] for f in pose_b["frames"]]
+        assert pose_a == pose_b
+        assert (a / "joints.csv").read_bytes() == (b / "joints.csv").read_bytes()
+    track_tasks = [t for t in stream.data if str(t["key"]).startswith("mocap-track-")]
+    assert len(track_tasks) == 2  # one sequential task per sequence
+    # Photo steps do not apply to a video workspace: skipped with the reason, nothing fails.
+    skipped = run_workspace(tmp_path / "serial50", (BatchStep.SFM, BatchStep.TRACK), track=TRACK)
+    assert skipped.ok and [s.status for s in skipped.steps] == [StepStatus.SKIPPED,
+                                                                StepStatus.REUSED]
+    assert skipped.steps[0].reason == "not a photo workspace (it has cameras.json)"
+
+
+def test_silhouettes_per_camera_on_dask_equal_a_serial_run(cluster, tmp_path):
+    """A real-video workspace: each camera's silhouettes as a task of its own give the very
+    masks (PNG bytes) and summary of the serial step."""
+    from distributed import Client, get_task_stream
+
+    from tests.tracking.test_video import make_blob_scene
+    from tracking.video import init_video
+
+    videos, calibration, _ = make_blob_scene(tmp_path / "scene", cameras=3, frames=6)
+    for kind in ("serial", "dask"):
+        init_video(tmp_path / kind, videos, calibration)
+    serial = run_workspace(tmp_path / "serial", (BatchStep.SILHOUETTES,))
+    with Client(cluster) as client, get_task_stream(client) as stream:
+        report = run_batch([tmp_path / "dask"], BatchConfig(
+            scheduler=cluster.scheduler_address, steps=(BatchStep.SILHOUETTES,)))
+    for result in (serial, report.results[0]):
+        assert [(s.step, s.status) for s in result.steps] == [
+            (BatchStep.SILHOUETTES, StepStatus.DONE)], result.line()
+    assert serial.steps[0].summary == report.results[0].steps[0].summary
+    camera_tasks = [t for t in stream.data if str(t["key"]).startswith("camera_silhouettes")]
+    assert len(camera_tasks) == 3
+    a, b = (Workspace(tmp_path / kind).silhouettes_dir for kind in ("serial", "dask"))
+    names = sorted(p.relative_to(a) for p in a.rglob("*.png"))
+    assert len(names) == 3 * 6 and names == sorted(p.relative_to(b) for p in b.rglob("*.png"))
+    assert any(cv2.imread(str(a / n), cv2.IMREAD_GRAYSCALE).any() for n in names)
+    for name in names:
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+    assert not list(tmp_path.glob("dask/silhouettes*partial*"))
 
 
 def _slow_add(item: int, offset: int) -> int:

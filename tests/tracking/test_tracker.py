@@ -111,6 +111,11 @@ def test_cli_synth_then_track_writes_every_output(tmp_path):
     assert any(e.startswith("/world/body/mesh@Mesh3D") for e in entities)
     again = run_cli("track", ws, "--simplex-evals", "25", "--init-rounds", "2")
     assert again.returncode == 0 and "up to date" in again.stdout
+    # The tracked sequence is what the motion report reads; 3 frames are too few to filter,
+    # which it says in one line (the full report is tested in test_report.py).
+    report = run_cli("report", ws)
+    assert report.returncode == 2 and "too short" in report.stderr
+    assert report.stderr.strip().count("\n") == 0
 
 
 def test_cli_track_needs_a_video_workspace(tmp_path):
