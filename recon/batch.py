@@ -3,8 +3,14 @@
 Scaling out is Dask's job (``dask.distributed``), which users already run on Kubernetes, HPC
 schedulers and the cloud; this module only describes the work as tasks:
 
-* each workspace's steps (``sfm`` → ``dense`` → ``mesh``) are a chain of tasks, one per step;
-  chains of different workspaces are independent and run side by side;
+* each workspace's steps (``sfm`` → ``dense`` → ``mesh`` for a photo workspace,
+  ``silhouettes`` → ``track`` for a video workspace, one with cameras.json) are a chain of
+  tasks, one per step; chains of different workspaces (sequences) are independent and run side
+  by side; tracking, sequential in time, stays one task per sequence; a step that does not
+  apply to a workspace is skipped with its reason (a synthetic workspace's silhouettes are
+  given), which fails nothing;
+* within a ``silhouettes`` task, each camera (background model, decoding, masks) is a task of
+  its own (:func:`tracking.silhouettes_step.cameras_mapped_by`);
 * within a ``dense`` task, the stereo pairs of the cpu-stereo backend are tasks of their own
   (:func:`recon.backends.stereo_pairs_mapped_by`), submitted from the worker;
 * :func:`map_ordered` and :func:`silhouettes_parallel` give the same per-item fan-out to other
@@ -42,19 +48,31 @@ if TYPE_CHECKING:
 
     from recon.mvs import DenseConfig, MeshConfig
     from recon.sfm import SfMConfig
+    from tracking.silhouettes_step import SilhouettesConfig
+    from tracking.track_step import TrackStepConfig
+    from tracking.tracker import TrackConfig
 
 
 class BatchStep(enum.StrEnum):
     SFM = "sfm"
     DENSE = "dense"
     MESH = "mesh"
+    SILHOUETTES = "silhouettes"
+    TRACK = "track"
 
 
 ALL_STEPS: tuple[BatchStep, ...] = tuple(BatchStep)
+PHOTO_STEPS: tuple[BatchStep, ...] = (BatchStep.SFM, BatchStep.DENSE, BatchStep.MESH)
+"""The steps of a photo workspace (`mocap init`), and its default."""
+VIDEO_STEPS: tuple[BatchStep, ...] = (BatchStep.SILHOUETTES, BatchStep.TRACK)
+"""The steps of a video workspace (one with cameras.json), and its default."""
 
 
-def parse_steps(text: str) -> tuple[BatchStep, ...]:
-    """``"sfm,dense,mesh"`` → steps in pipeline order (the order given does not matter)."""
+def parse_steps(text: str | None) -> tuple[BatchStep, ...] | None:
+    """``"sfm,dense,mesh"`` → steps in pipeline order (the order given does not matter);
+    None → None: each workspace's own steps (photo or video)."""
+    if text is None:
+        return None
     names = [n.strip() for n in text.split(",") if n.strip()]
     unknown = [n for n in names if n not in {s.value for s in BatchStep}]
     if unknown or not names:
@@ -76,8 +94,10 @@ class BatchConfig:
             "metavar": "ADDRESS",
         },
     )
-    steps: tuple[BatchStep, ...] = field(
-        default=ALL_STEPS, metadata={"help": "steps to run, comma-separated: sfm,dense,mesh"}
+    steps: tuple[BatchStep, ...] | None = field(
+        default=None,
+        metadata={"help": "steps to run, comma-separated: sfm,dense,mesh (photo workspaces), "
+                  "silhouettes,track (video workspaces); default: all of a workspace's kind"},
     )
     workers: int | None = field(
         default=None,
@@ -90,12 +110,12 @@ class BatchConfig:
     )
     pair_tasks: bool = field(
         default=True,
-        metadata={"help": "run the dense stereo pairs of a workspace as tasks of their own "
-                  "(--no-pair-tasks: inside its dense task)"},
+        metadata={"help": "run the dense stereo pairs, and the silhouettes of each camera, of "
+                  "a workspace as tasks of their own (--no-pair-tasks: inside its step's task)"},
     )
 
     def __post_init__(self) -> None:
-        if not self.steps:
+        if self.steps is not None and not self.steps:
             raise UserError("no steps to run; give --steps sfm,dense,mesh or a part of it")
         for name in ("workers", "threads_per_worker"):
             value = getattr(self, name)
@@ -121,10 +141,14 @@ class StepOutcome:
     """One line, for a failed step: the UserError's message, else ``Type: message``."""
     detail: str | None = None
     """The traceback of an unexpected error (not a UserError)."""
+    reason: str | None = None
+    """Why a step was skipped although nothing failed (it does not apply to the workspace)."""
 
     @property
     def ok(self) -> bool:
-        return self.status in (StepStatus.DONE, StepStatus.REUSED)
+        """Done, reused, or skipped for a reason (not because an earlier step failed)."""
+        return (self.status in (StepStatus.DONE, StepStatus.REUSED)
+                or (self.status is StepStatus.SKIPPED and self.reason is not None))
 
 
 @dataclass(frozen=True)
@@ -145,6 +169,9 @@ class WorkspaceResult:
             return f"{self.workspace}  FAILED at {failed.step}: {failed.error}"
         parts = []
         for s in self.steps:
+            if s.status is StepStatus.SKIPPED:
+                parts.append(f"{s.step} skipped ({s.reason})")
+                continue
             figure = _figure(s)
             parts.append(f"{s.step} {s.seconds:.1f}s" + (f" {figure}" if figure else "")
                          + (" (reused)" if s.status is StepStatus.REUSED else ""))
@@ -159,6 +186,10 @@ def _figure(outcome: StepOutcome) -> str:
         return f"[{summary['points']} points]"
     if outcome.step is BatchStep.MESH and "faces" in summary:
         return f"[{summary['faces']} faces]"
+    if outcome.step is BatchStep.SILHOUETTES and "cameras" in summary:
+        return f"[{len(summary['cameras'])} cameras x {summary['processed']} frames]"
+    if outcome.step is BatchStep.TRACK and "tracked" in summary:
+        return f"[{summary['tracked']}/{summary['frames']} frames tracked]"
     return ""
 
 
@@ -191,6 +222,9 @@ class _Settings:
     sfm: Any
     dense: Any
     mesh: Any
+    silhouettes: Any
+    track_step: Any
+    track: Any
     overwrite: bool
     pair_tasks: bool
     colmap_log_level: int
@@ -269,6 +303,8 @@ def _run_step(root: Path, step: BatchStep, settings: _Settings) -> StepOutcome:
     from recon.sfm import STEPS
     from recon.workspace import Timer, Workspace
 
+    if step in VIDEO_STEPS:
+        return _run_video_step(root, step, settings)
     ws = Workspace.open(root)
     with Timer() as timer:
         if step is BatchStep.SFM:
@@ -295,6 +331,61 @@ def _run_step(root: Path, step: BatchStep, settings: _Settings) -> StepOutcome:
     return StepOutcome(step, status, timer.seconds, dict(summary))
 
 
+def _run_video_step(root: Path, step: BatchStep, settings: _Settings) -> StepOutcome:
+    """``silhouettes`` or ``track`` of one video workspace; raises on failure."""
+    from recon.workspace import Timer, Workspace
+    from tracking.silhouettes_step import make_silhouettes
+    from tracking.track_step import track_workspace
+
+    ws = Workspace.open_video(root)
+    with Timer() as timer:
+        if step is BatchStep.SILHOUETTES:
+            before = ws.step("silhouettes")
+            record = make_silhouettes(ws, settings.silhouettes, overwrite=settings.overwrite)
+            reused = before is not None and before == record
+            summary = dict(record.summary)
+        else:
+            summary = track_workspace(ws, settings.track_step, settings.track,
+                                      overwrite=settings.overwrite, progress=False)
+            reused = bool(summary.pop("up_to_date", False))
+    status = StepStatus.REUSED if reused else StepStatus.DONE
+    return StepOutcome(step, status, timer.seconds, summary)
+
+
+def _kind(root: Path) -> str | None:
+    """``"video"`` (cameras.json), ``"photo"`` (images/), or None: not a workspace (its steps
+    then fail with the workspace's own message)."""
+    if (root / "cameras.json").is_file():
+        return "video"
+    if (root / "images").is_dir():
+        return "photo"
+    return None
+
+
+def _not_applicable(root: Path, step: BatchStep) -> str | None:
+    """Why ``step`` does not apply to the workspace at ``root``, or None when it does."""
+    kind = _kind(root)
+    if kind == "video" and step in PHOTO_STEPS:
+        return "not a photo workspace (it has cameras.json)"
+    if kind == "photo" and step in VIDEO_STEPS:
+        return "not a video workspace (no cameras.json)"
+    if (step is BatchStep.SILHOUETTES and kind == "video" and not (root / "videos").is_dir()
+            and (root / "run.json").is_file()):
+        from recon.workspace import Workspace
+
+        if Workspace(root).step("synth") is not None:
+            return "silhouettes given (synthetic)"
+    return None
+
+
+def _steps_for(root: Path, steps: Sequence[BatchStep] | None) -> tuple[BatchStep, ...]:
+    """The steps to run on one workspace: ``steps`` in pipeline order, or by default those of
+    its kind (a folder that is no workspace gets the photo steps, which say so)."""
+    if steps is None:
+        return VIDEO_STEPS if _kind(root) == "video" else PHOTO_STEPS
+    return _ordered(steps)
+
+
 def _failed(step: BatchStep, exc: BaseException, seconds: float) -> StepOutcome:
     from plugins.registry import PluginError
 
@@ -308,6 +399,8 @@ def _failed(step: BatchStep, exc: BaseException, seconds: float) -> StepOutcome:
 def _guarded_step(root: Path, step: BatchStep, settings: _Settings) -> StepOutcome:
     start = time.perf_counter()
     try:
+        if (reason := _not_applicable(root, step)) is not None:
+            return StepOutcome(step, StepStatus.SKIPPED, reason=reason)
         return _run_step(root, step, settings)
     except Exception as exc:  # one workspace's failure must not stop the batch
         return _failed(step, exc, time.perf_counter() - start)
@@ -315,19 +408,24 @@ def _guarded_step(root: Path, step: BatchStep, settings: _Settings) -> StepOutco
 
 def run_workspace(
     workspace: Path | str,
-    steps: Sequence[BatchStep] = ALL_STEPS,
+    steps: Sequence[BatchStep] | None = None,
     sfm: SfMConfig | None = None,
     dense: DenseConfig | None = None,
     mesh: MeshConfig | None = None,
     *,
     overwrite: bool = False,
+    silhouettes: SilhouettesConfig | None = None,
+    track_step: TrackStepConfig | None = None,
+    track: TrackConfig | None = None,
 ) -> WorkspaceResult:
     """The steps of one workspace in this process, one after the other: what a batch task
-    chain does, and the serial reference its results are compared with."""
-    settings = _settings(sfm, dense, mesh, overwrite=overwrite, pair_tasks=False)
+    chain does, and the serial reference its results are compared with. ``steps`` None: those
+    of the workspace's kind (:data:`PHOTO_STEPS` or :data:`VIDEO_STEPS`)."""
+    settings = _settings(sfm, dense, mesh, overwrite=overwrite, pair_tasks=False,
+                         silhouettes=silhouettes, track_step=track_step, track=track)
     root = Path(workspace)
     outcomes: list[StepOutcome] = []
-    for step in _ordered(steps):
+    for step in _steps_for(root, steps):
         if outcomes and not outcomes[-1].ok:
             outcomes.append(StepOutcome(step, StepStatus.SKIPPED))
         else:
@@ -339,15 +437,20 @@ def _ordered(steps: Sequence[BatchStep]) -> tuple[BatchStep, ...]:
     return tuple(s for s in ALL_STEPS if s in set(steps))
 
 
-def _settings(sfm: Any, dense: Any, mesh: Any, *, overwrite: bool, pair_tasks: bool
-              ) -> _Settings:
+def _settings(sfm: Any, dense: Any, mesh: Any, *, overwrite: bool, pair_tasks: bool,
+              silhouettes: Any = None, track_step: Any = None, track: Any = None) -> _Settings:
     import pycolmap
 
     from recon.mvs import DenseConfig, MeshConfig
     from recon.sfm import SfMConfig
+    from tracking.silhouettes_step import SilhouettesConfig
+    from tracking.track_step import TrackStepConfig
+    from tracking.tracker import TrackConfig
 
     return _Settings(sfm=sfm or SfMConfig(), dense=dense or DenseConfig(),
-                     mesh=mesh or MeshConfig(), overwrite=overwrite, pair_tasks=pair_tasks,
+                     mesh=mesh or MeshConfig(), silhouettes=silhouettes or SilhouettesConfig(),
+                     track_step=track_step or TrackStepConfig(), track=track or TrackConfig(),
+                     overwrite=overwrite, pair_tasks=pair_tasks,
                      colmap_log_level=int(pycolmap.logging.minloglevel))
 
 
@@ -403,6 +506,7 @@ def _step_task(root: str, step: BatchStep, settings: _Settings,
     import pycolmap
 
     from recon.backends import stereo_pairs_mapped_by
+    from tracking.silhouettes_step import cameras_mapped_by
 
     if upstream is not None and not upstream.ok:
         return StepOutcome(step, StepStatus.SKIPPED)
@@ -410,6 +514,8 @@ def _step_task(root: str, step: BatchStep, settings: _Settings,
     with contextlib.ExitStack() as stack:
         if step is BatchStep.DENSE and settings.pair_tasks:
             stack.enter_context(stereo_pairs_mapped_by(_map_on_this_cluster))
+        if step is BatchStep.SILHOUETTES and settings.pair_tasks:
+            stack.enter_context(cameras_mapped_by(_map_on_this_cluster))
         return _guarded_step(Path(root), step, settings)
 
 
@@ -489,6 +595,9 @@ def run_batch(
     overwrite: bool = False,
     client: Client | None = None,
     echo: Callable[[str], None] | None = None,
+    silhouettes: SilhouettesConfig | None = None,
+    track_step: TrackStepConfig | None = None,
+    track: TrackConfig | None = None,
 ) -> BatchReport:
     """Run ``config.steps`` of every workspace as Dask tasks; returns one result per workspace.
 
@@ -504,7 +613,8 @@ def run_batch(
     if len(set(resolved)) < len(resolved):
         twice = sorted({str(r) for r in roots if resolved.count(r.resolve()) > 1})
         raise UserError(f"workspace given twice: {', '.join(twice)}")
-    settings = _settings(sfm, dense, mesh, overwrite=overwrite, pair_tasks=config.pair_tasks)
+    settings = _settings(sfm, dense, mesh, overwrite=overwrite, pair_tasks=config.pair_tasks,
+                         silhouettes=silhouettes, track_step=track_step, track=track)
     with contextlib.ExitStack() as stack:
         if client is None:
             client = stack.enter_context(connect(config))
@@ -521,7 +631,8 @@ def run_batch(
             for note in notes:
                 echo(note)
         start = time.perf_counter()
-        outcomes = _submit_and_wait(client, roots, resolved, _ordered(config.steps), settings)
+        steps = [_steps_for(root, config.steps) for root in resolved]
+        outcomes = _submit_and_wait(client, roots, resolved, steps, settings)
         seconds = time.perf_counter() - start
     results = tuple(WorkspaceResult(root, tuple(steps)) for root, steps in zip(
         roots, outcomes, strict=True))
@@ -530,8 +641,8 @@ def run_batch(
 
 
 def _submit_and_wait(
-    client: Client, roots: list[Path], resolved: list[Path], steps: tuple[BatchStep, ...],
-    settings: _Settings,
+    client: Client, roots: list[Path], resolved: list[Path],
+    steps_of: list[tuple[BatchStep, ...]], settings: _Settings,
 ) -> list[list[StepOutcome]]:
     from distributed import as_completed
 
@@ -539,7 +650,7 @@ def _submit_and_wait(
 
     run = uuid.uuid4().hex[:8]
     chains: list[list[Future]] = []
-    for index, root in enumerate(resolved):
+    for index, (root, steps) in enumerate(zip(resolved, steps_of, strict=True)):
         chain: list[Future] = []
         for step in steps:
             upstream = chain[-1] if chain else None
@@ -554,12 +665,12 @@ def _submit_and_wait(
     for future in as_completed([f for chain in chains for f in chain]):
         i, k = where[future.key]
         failed += _is_failure(future, chains[i][k - 1] if k else None)
-        progress.set_postfix_str(f"{roots[i].name} {steps[k]}"
+        progress.set_postfix_str(f"{roots[i].name} {steps_of[i][k]}"
                                  + (f", {failed} failed" if failed else ""))
         progress.update(1)
     progress.close()
     return [[_outcome(future, steps[k], chain[:k]) for k, future in enumerate(chain)]
-            for chain in chains]
+            for chain, steps in zip(chains, steps_of, strict=True)]
 
 
 def _is_failure(future: Future, upstream: Future | None) -> bool:

@@ -430,17 +430,22 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser(
         "batch",
-        help="many workspaces' sfm, dense and mesh steps as tasks on a Dask cluster",
+        help="many workspaces' steps (sfm, dense, mesh; silhouettes, track) as tasks on a "
+        "Dask cluster",
         description="Run the steps of every workspace as Dask tasks: on a LocalCluster "
         "sized to this machine, or on a running scheduler (--scheduler). Dense stereo "
-        "pairs are tasks of their own. A failed workspace is reported and the others go on; "
+        "pairs and each camera's silhouettes are tasks of their own; tracking runs as one "
+        "task per sequence. A failed workspace is reported and the others go on; "
         "a re-run reuses every finished step. Workspaces must be on a file system that every "
         "worker sees at the same path.",
     )
     p.add_argument("workspaces", type=Path, nargs="+", metavar="WS",
-                   help="workspace folders (made with `mocap init`)")
-    p.add_argument("--steps", dest="batch_steps", default="sfm,dense,mesh", metavar="STEPS",
-                   help="steps to run, comma-separated (default: sfm,dense,mesh)")
+                   help="workspace folders (made with `mocap init`, `mocap init-video` or "
+                   "`mocap synth`)")
+    p.add_argument("--steps", dest="batch_steps", default=None, metavar="STEPS",
+                   help="steps to run, comma-separated: sfm,dense,mesh (photo workspaces), "
+                   "silhouettes,track (video workspaces); a step that does not apply to a "
+                   "workspace is skipped (default: all steps of each workspace's kind)")
     p.add_argument("--overwrite", action="store_true", help="recompute every step")
     add_config_arguments(p, BatchConfig, exclude=("steps",))
     add_config_arguments(p, SfMConfig, exclude=("num_threads",))
