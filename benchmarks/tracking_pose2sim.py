@@ -14,28 +14,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import cv2
 import numpy as np
+from _cli import mocap  # benchmarks/ is on sys.path when a script here runs
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT.parent / "shared" / "data" / "pose2sim_demo"
 OUT = ROOT / "benchmarks" / "out"
-
-
-def _mocap(*args: str) -> float:
-    start = time.perf_counter()
-    result = subprocess.run([sys.executable, "-m", "recon.cli", *args], capture_output=True,
-                            text=True)  # fmt: skip
-    if result.returncode != 0:
-        sys.exit(f"mocap {' '.join(args)} failed:\n{result.stderr}")
-    print(result.stdout.strip())
-    return time.perf_counter() - start
 
 
 def main() -> None:
@@ -53,11 +42,11 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         ws = args.keep or Path(tmp) / "pose2sim"
         if not (ws / "cameras.json").exists():
-            _mocap("init-video", str(ws), "--videos", str(DEMO / "videos"), "--calibration",
+            mocap("init-video", str(ws), "--videos", str(DEMO / "videos"), "--calibration",
                    str(DEMO / "calibration" / "Calib.qca.txt"))  # fmt: skip
-        t_sil = _mocap("silhouettes", str(ws))
+        t_sil = mocap("silhouettes", str(ws))
         extra = ["--last", str(args.last)] if args.last is not None else []
-        t_track = _mocap("track", str(ws), *extra)
+        t_track = mocap("track", str(ws), *extra)
         pose_file = json.loads((ws / "tracks" / "pose.json").read_text())
         model = BodyModel(BodyShape(**pose_file["shape"]))
         cameras = read_cameras(ws / "cameras.json")

@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import subprocess
 import sys
 import tempfile
 import time
@@ -24,19 +23,10 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+from _cli import mocap  # benchmarks/ is on sys.path when a script here runs
 
 ROOT = Path(__file__).resolve().parents[1]
 WALK = ROOT.parent / "shared" / "data" / "mocap_bvh" / "cmu_02_01_walk.bvh"
-
-
-def _mocap(*args: str) -> float:
-    start = time.perf_counter()
-    result = subprocess.run([sys.executable, "-m", "recon.cli", *args], capture_output=True,
-                            text=True)  # fmt: skip
-    if result.returncode != 0:
-        sys.exit(f"mocap {' '.join(args)} failed:\n{result.stderr}")
-    print(result.stdout.strip())
-    return time.perf_counter() - start
 
 
 def _joints(path: Path) -> dict[int, dict[str, np.ndarray]]:
@@ -93,9 +83,9 @@ def main() -> None:
         sys.exit(f"{WALK} is absent")
     with tempfile.TemporaryDirectory() as tmp:
         ws = args.keep or Path(tmp) / "walk"
-        _mocap("synth", str(ws), "--bvh", str(WALK), "--cameras", "4", "--size", "640x480")
+        mocap("synth", str(ws), "--bvh", str(WALK), "--cameras", "4", "--size", "640x480")
         extra = ["--last", str(args.frames - 1)] if args.frames else []
-        seconds = _mocap("track", str(ws), "--overwrite", *extra)
+        seconds = mocap("track", str(ws), "--overwrite", *extra)
         truth, tracked = _joints(ws / "gt" / "joints.csv"), _joints(ws / "tracks" / "joints.csv")
         run = json.loads((ws / "run.json").read_text())["steps"]["track"]["summary"]
         frames = sorted(f for f in truth if not args.frames or f < args.frames)

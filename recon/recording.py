@@ -331,7 +331,13 @@ def log_silhouette(
     """A foreground mask (H, W) (bool, or 0/255) as a `SegmentationImage` of one frame on the
     ``frame`` and ``time`` timelines; downscaled like `log_camera_image`'s Pinhole, so logged at
     a camera's ``.../image`` entity it overlays that camera's view."""
-    ids = (np.asarray(mask) > 0).astype(np.uint8)
+    _log_segmentation_frame(rec, entity, (np.asarray(mask) > 0).astype(np.uint8), frame, time_s)
+
+
+def _log_segmentation_frame(rec: rr.RecordingStream, entity: str, ids: np.ndarray, frame: int,
+                            time_s: float) -> None:  # fmt: skip
+    """Class ids (H, W) uint8 as a `SegmentationImage` of one frame, downscaled (nearest) like
+    `log_camera_image`'s Pinhole so that it overlays the camera's view."""
     height, width = ids.shape
     scale = _display_scale(width, height)
     if scale < 1.0:
@@ -382,15 +388,7 @@ def log_xor_overlay(
                                           for i, label, color in XOR_CLASSES]),
             static=True)  # fmt: skip
     ids = (np.asarray(model, bool).astype(np.uint8) + 2 * np.asarray(image, bool)).astype(np.uint8)
-    height, width = ids.shape
-    scale = _display_scale(width, height)
-    if scale < 1.0:
-        ids = cv2.resize(ids, (round(width * scale), round(height * scale)),
-                         interpolation=cv2.INTER_NEAREST)
-    rec.set_time(FRAME_TIMELINE, sequence=frame)
-    rec.set_time(TIME_TIMELINE, duration=time_s)
-    rec.log(entity, rr.SegmentationImage(ids))
-    rec.reset_time()
+    _log_segmentation_frame(rec, entity, ids, frame, time_s)
 
 
 def log_mesh_frame(
