@@ -55,6 +55,7 @@ from tracking.kinematics import (
     compute_kinematics,
 )
 
+GT_POSE = Path("gt") / "pose.json"  # ground truth of `mocap synth`, same layout
 REPORT_DIR = "report"
 POSE_TRACK = Path("tracks") / "pose.json"
 
@@ -289,11 +290,14 @@ def report_from_bvh(
 def report_from_workspace(
     workspace: Path, config: ReportConfig, *, overwrite: bool = False
 ) -> ReportSummary:
-    """Report of ``WS/tracks/pose.json`` in ``WS/report/`` and ``WS/logs/report.rrd``."""
+    """Report of ``WS/tracks/pose.json`` in ``WS/report/`` and ``WS/logs/report.rrd``; a
+    synthetic sequence not tracked yet (`mocap synth`) reports its ``gt/pose.json``."""
     root = Path(workspace)
     if root.exists() and not root.is_dir():
         raise UserError(f"workspace path {root} is a file, not a folder")
     track = root / POSE_TRACK
+    if not track.is_file() and (root / GT_POSE).is_file():
+        track = root / GT_POSE
     if not track.is_file():
         raise UserError(f"{track} not found: track the sequence first (`mocap track {root}`), "
                         "or report a BVH clip with `mocap report --bvh FILE --out DIR`")

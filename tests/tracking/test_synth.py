@@ -350,3 +350,20 @@ def test_ring_grows_until_the_subject_fits():
     assert again[0] == cameras[0]  # an explicit radius gives the same ring
     with pytest.raises(UserError, match="leaves the view of cam0[02]"):
         place_cameras(vertices, pelvis, 0.0, 1.8, (320, 240), replace(config, radius_m=4.0))
+
+
+@pytest.mark.shared_data
+def test_report_of_a_synthetic_sequence_uses_its_ground_truth(tmp_path):
+    walk = shared_dataset("mocap_bvh") / "cmu_02_01_walk.bvh"
+    ws = tmp_path / "walk"
+    made = run_cli("synth", ws, "--bvh", walk, "--frames", "24", "--size", "160x120", "--clean")
+    assert made.returncode == 0, made.stderr
+    report = run_cli("report", ws)
+    assert report.returncode == 0, report.stderr
+    assert "gt/pose.json" in report.stdout
+    with (ws / "report" / "center_of_mass.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == 24
+    # The CMU walk moves at about 1.25 m/s along Z: the centre of mass follows.
+    speed = (float(rows[-1]["z"]) - float(rows[0]["z"])) / (float(rows[-1]["time_s"]))
+    assert 1.0 < abs(speed) < 1.5
