@@ -114,7 +114,14 @@ def _cmd_batch(args: argparse.Namespace) -> None:
     from recon.batch import BatchConfig, parse_steps, run_batch
     from recon.mvs import DenseConfig, MeshConfig
     from recon.sfm import SfMConfig
+    from tracking.silhouette import SilhouetteConfig
+    from tracking.silhouettes_step import SilhouettesConfig
+    from tracking.tracker import TrackConfig
 
+    try:
+        thresholds = config_from_args(SilhouetteConfig, args)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
     report = run_batch(
         args.workspaces,
         config_from_args(BatchConfig, args, steps=parse_steps(args.batch_steps)),
@@ -123,6 +130,8 @@ def _cmd_batch(args: argparse.Namespace) -> None:
         config_from_args(MeshConfig, args),
         overwrite=args.overwrite,
         echo=print,
+        silhouettes=config_from_args(SilhouettesConfig, args, thresholds=thresholds),
+        track=config_from_args(TrackConfig, args),
     )
     print("\n".join(report.lines()))
     if report.failed:
@@ -451,6 +460,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_config_arguments(p, SfMConfig, exclude=("num_threads",))
     add_config_arguments(p, DenseConfig)
     add_config_arguments(p, MeshConfig)
+    # Video workspaces: the settings of `mocap silhouettes` and `mocap track`.
+    add_config_arguments(p, SilhouettesConfig, exclude=("thresholds",))
+    add_config_arguments(p, SilhouetteConfig)
+    add_config_arguments(p, TrackConfig)
     p.set_defaults(func=_cmd_batch)
 
     p = _step_command(
