@@ -21,9 +21,10 @@ hull is carved on a voxel grid around the point where the views' silhouette cent
 its surface fitted by `tracking.fit.fit_body` (scale and pose), then refined against the
 silhouettes. A pose given by the user replaces this ("model alignment", thesis 6.2.4).
 
-A frame whose energy stays above `max_xor_fraction` of the silhouette area is a divergence: it
-is logged, the tracker re-initialises from the visual hull, and if that fails too the frame is
-reported lost (no joints; never NaN).
+A frame whose energy stays above `max_xor_fraction` of the silhouette area (or 1.5 times the
+XOR of the initial frame, when real silhouettes with holes and ghosts set a higher floor) is a
+divergence: it is logged, the tracker re-initialises from the visual hull, and if that fails
+too the frame is reported lost (no joints; never NaN).
 """
 
 from __future__ import annotations
@@ -489,7 +490,12 @@ class SilhouetteTracker:
                     x = self._refine_all(energy, x, change=np.abs(x - predicted) / 2)
             energy = self._energy(masks)
             e = energy(Pose(x))
-            if e > self.config.max_xor_fraction * area and event == "":
+            if event:
+                # What the silhouettes allow: real masks have holes and ghosts, so the first
+                # frame's XOR sets the bar (at least `max_xor_fraction`) for the divergence test.
+                self._xor_floor = e / area
+            limit = max(self.config.max_xor_fraction, 1.5 * self._xor_floor) * area
+            if e > limit and event == "":
                 # Divergence: start again from the visual hull.
                 pose, _ = self.initialise(masks)
                 x2 = pose.params
@@ -497,7 +503,7 @@ class SilhouetteTracker:
                 event = f"reinit (XOR {e / area:.0%} of the silhouette)"
                 if e2 < e:
                     x, e = x2, e2
-            if e > self.config.max_xor_fraction * area:
+            if e > limit and not event.startswith("init"):
                 self.history = []
                 return FrameResult(frame, None, e, area, self.evaluations,
                                    time.perf_counter() - start,
