@@ -15,9 +15,10 @@ from pathlib import Path
 from tqdm import tqdm
 
 
-def bar(total: int, desc: str, unit: str) -> tqdm:
+def bar(total: int, desc: str, unit: str, enabled: bool = True) -> tqdm:
     # disable=None: no bar when stderr is not a terminal (CI logs, pipes).
-    return tqdm(total=total, desc=desc, unit=unit, disable=None, leave=False, dynamic_ncols=True)
+    return tqdm(total=total, desc=desc, unit=unit, disable=None if enabled else True,
+                leave=False, dynamic_ncols=True)
 
 
 def count_rows(database: Path, table: str) -> Callable[[], int]:

@@ -226,6 +226,17 @@ FRAME_TIMELINE = "frame"
 TIME_TIMELINE = "time"
 
 
+@contextlib.contextmanager
+def _at_frame(rec: rr.RecordingStream, frame: int, time_s: float) -> Iterator[None]:
+    """Log what the block logs at this frame on the ``frame`` and ``time`` timelines."""
+    rec.set_time(FRAME_TIMELINE, sequence=frame)
+    rec.set_time(TIME_TIMELINE, duration=time_s)
+    try:
+        yield
+    finally:
+        rec.reset_time()
+
+
 def _frame_indexes(frames: np.ndarray, times_s: np.ndarray) -> list[rr.TimeColumn]:
     return [
         rr.TimeColumn(FRAME_TIMELINE, sequence=np.asarray(frames, dtype=np.int64)),
@@ -343,10 +354,8 @@ def _log_segmentation_frame(rec: rr.RecordingStream, entity: str, ids: np.ndarra
     if scale < 1.0:
         ids = cv2.resize(ids, (round(width * scale), round(height * scale)),
                          interpolation=cv2.INTER_NEAREST)
-    rec.set_time(FRAME_TIMELINE, sequence=frame)
-    rec.set_time(TIME_TIMELINE, duration=time_s)
-    rec.log(entity, rr.SegmentationImage(ids))
-    rec.reset_time()
+    with _at_frame(rec, frame, time_s):
+        rec.log(entity, rr.SegmentationImage(ids))
 
 
 def log_frame_image(
@@ -396,29 +405,23 @@ def log_mesh_frame(
     time_s: float,
 ) -> None:  # fmt: skip
     """A mesh that moves: its vertices on the ``frame`` and ``time`` timelines."""
-    rec.set_time(FRAME_TIMELINE, sequence=frame)
-    rec.set_time(TIME_TIMELINE, duration=time_s)
-    rec.log(entity, rr.Mesh3D(vertex_positions=np.asarray(vertices, dtype=np.float32),
-                              triangle_indices=np.asarray(faces, dtype=np.uint32)))  # fmt: skip
-    rec.reset_time()
+    with _at_frame(rec, frame, time_s):
+        rec.log(entity, rr.Mesh3D(vertex_positions=np.asarray(vertices, dtype=np.float32),
+                                  triangle_indices=np.asarray(faces, dtype=np.uint32)))
 
 
 def log_skeleton_frame(
     rec: rr.RecordingStream, entity: str, points_in_world: np.ndarray, frame: int, time_s: float,
 ) -> None:  # fmt: skip
     """`log_skeleton` of one frame on the ``frame`` and ``time`` timelines."""
-    rec.set_time(FRAME_TIMELINE, sequence=frame)
-    rec.set_time(TIME_TIMELINE, duration=time_s)
-    log_skeleton(rec, entity, points_in_world)
-    rec.reset_time()
+    with _at_frame(rec, frame, time_s):
+        log_skeleton(rec, entity, points_in_world)
 
 
 def log_frame_scalar(rec: rr.RecordingStream, entity: str, value: float, frame: int,
                      time_s: float) -> None:  # fmt: skip
-    rec.set_time(FRAME_TIMELINE, sequence=frame)
-    rec.set_time(TIME_TIMELINE, duration=time_s)
-    rec.log(entity, rr.Scalars(float(value)))
-    rec.reset_time()
+    with _at_frame(rec, frame, time_s):
+        rec.log(entity, rr.Scalars(float(value)))
 
 
 def viewer_command(recordings: Sequence[Path]) -> list[str]:

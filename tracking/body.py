@@ -56,6 +56,10 @@ END_SITE_NAMES: tuple[str, ...] = NODE_NAMES[11:]
 # Parents precede children, so one pass in index order is a valid forward-kinematics order.
 NODE_PARENTS: tuple[int, ...] = (-1, 0, 1, 1, 3, 1, 5, 0, 7, 0, 9, 2, 4, 6, 8, 10)
 NODE_INDEX: dict[str, int] = {name: i for i, name in enumerate(NODE_NAMES)}
+# (parent, child) node pairs: the bones, for drawing the skeleton.
+BONES: tuple[tuple[int, int], ...] = tuple(
+    (parent, node) for node, parent in enumerate(NODE_PARENTS) if parent >= 0
+)
 
 
 # ---------------------------------------------------------------------------------------------

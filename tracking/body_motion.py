@@ -13,14 +13,20 @@ channels stay 0; the X channel is the hinge angle with the sign of its axis (the
 lengths back from the OFFSETs and the 24 parameters from the channels. A BVH carries the
 skeleton but no segment girths, so those are `BodyShape.default`'s for the skeleton's height.
 Any other skeleton (the CMU one) goes through `tracking.retarget` instead (`poses_from_bvh`).
+
+`read_pose_file` reads the other file format of pose sequences, ``pose.json`` (`mocap track`'s
+``tracks/pose.json``, `mocap synth`'s ``gt/pose.json``, `mocap track --init-pose`).
 """
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
+from recon.errors import UserError
 from tracking.body import (
     NODE_NAMES,
     NODE_PARENTS,
@@ -143,3 +149,45 @@ def poses_from_motion(motion: Motion) -> tuple[list[Pose], BodyShape]:
         else:  # hinge about +-X: the X angle, signed by the axis
             params[:, owned[0]] = zxy[:, 1] * POSE_LAYOUT[owned[0]].axis[0]
     return [Pose(row) for row in params], shape
+
+
+PoseFrames = list[tuple[int, "np.ndarray | None"]]
+"""(frame, params (24,) or None when the frame is lost), sorted by frame."""
+
+
+def read_pose_file(path: Path | str) -> tuple[float, BodyShape, PoseFrames]:
+    """Frame rate, shape and (frame, params (24,) or None when lost) sorted by frame, of a
+    pose file::
+
+        {"frame_rate": 25.0,
+         "shape": {<every BodyShape field>: metres, ...},
+         "frames": [{"frame": 0, "params": [24 floats in POSE_LAYOUT order]},
+                    {"frame": 1, "params": null}, ...]}
+
+    Other keys are ignored. A one-line `UserError` names what is wrong.
+    """
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except OSError as exc:
+        raise UserError(f"cannot read {path}: {exc.strerror}") from None
+    except json.JSONDecodeError as exc:
+        raise UserError(f"{path} is not valid JSON ({exc})") from None
+    try:
+        frame_rate = float(data["frame_rate"])
+        shape = BodyShape(**{k: float(v) for k, v in data["shape"].items()})
+        entries = sorted(data["frames"], key=lambda e: int(e["frame"]))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise UserError(f"{path}: not a pose track ({exc!s}); expected frame_rate, shape and "
+                        "frames") from None
+    if not entries:
+        raise UserError(f"{path} holds no frames")
+    frames: list[tuple[int, np.ndarray | None]] = []
+    for entry in entries:
+        values = entry.get("params")
+        row = None if values is None else np.asarray(values, dtype=float)
+        if row is not None and row.shape != (len(POSE_LAYOUT),):
+            raise UserError(f"{path}: frame {entry['frame']} has {row.size} pose parameters, "
+                            f"not {len(POSE_LAYOUT)}")
+        frames.append((int(entry["frame"]), row))
+    return frame_rate, shape, frames

@@ -35,6 +35,7 @@ non-human cloud thus reports a failure rather than a confident wrong answer.
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass, field, replace
 
@@ -190,24 +191,21 @@ class _Surface:
     """
 
     def __init__(self, n_rings: int = 12, n_around: int = 18) -> None:
-        pts, normals, nodes = [], [], []
-        shapes = [shape_from_scales(1.0, 1.0), shape_from_scales(1.0, 2.0)]
-        per_g = []
-        for shape in shapes:
-            seg_pts = []
-            for spec in segment_specs(shape):
+        def sample(girth: float) -> list[tuple[np.ndarray, np.ndarray, int]]:
+            """(vertices in the node frame, faces, node) of every segment at height 1."""
+            out = []
+            for spec in segment_specs(shape_from_scales(1.0, girth)):
                 v, f = superquadric(np.array(spec.semi_axes), spec.eps_lat, spec.eps_lon,
                                     n_rings, n_around)  # fmt: skip
-                seg_pts.append(v + np.array(spec.centre_in_node))
-                if shape is shapes[0]:
-                    normals.append(_vertex_normals(v, f))
-                    nodes.append(np.full(len(v), NODE_NAMES.index(spec.node)))
-            per_g.append(np.concatenate(seg_pts))
-        pts = per_g[0]
-        self.in_node = pts
-        self.per_girth = per_g[1] - per_g[0]
-        self.normal_in_node = np.concatenate(normals)
-        self.node = np.concatenate(nodes)
+                out.append((v + np.array(spec.centre_in_node), f, NODE_NAMES.index(spec.node)))
+            return out
+
+        # Every semi-axis is linear in g, so two girths give the sample at any girth.
+        one, two = sample(1.0), sample(2.0)
+        self.in_node = np.concatenate([v for v, _, _ in one])
+        self.per_girth = np.concatenate([v for v, _, _ in two]) - self.in_node
+        self.normal_in_node = np.concatenate([_vertex_normals(v, f) for v, f, _ in one])
+        self.node = np.concatenate([np.full(len(v), node) for v, _, node in one])
 
     def posed(self, x: np.ndarray, index: np.ndarray | slice = slice(None)):
         """World positions and normals of samples `index` for unknowns x = (pose, h, g)."""
@@ -231,14 +229,10 @@ def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return acc / np.maximum(np.linalg.norm(acc, axis=1), 1e-300)[:, None]
 
 
-_SURFACE: _Surface | None = None
-
-
+@functools.cache
 def _surface() -> _Surface:
-    global _SURFACE
-    if _SURFACE is None:
-        _SURFACE = _Surface()
-    return _SURFACE
+    """The model surface sample, built once per process (it depends on nothing)."""
+    return _Surface()
 
 
 def _bounds(h0: float) -> tuple[np.ndarray, np.ndarray]:

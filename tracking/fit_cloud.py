@@ -18,13 +18,8 @@ import numpy as np
 
 from recon.errors import UserError
 from recon.workspace import Timer, Workspace, atomic_output, fingerprint, write_json_atomic
-from tracking.body import NODE_NAMES, NODE_PARENTS, BodyModel
+from tracking.body import BONES, NODE_NAMES, BodyModel
 from tracking.fit import FitConfig, FitResult, check_cloud, fit_body
-
-# Skeleton drawing: every node but the root connects to its parent.
-BONES: tuple[tuple[int, int], ...] = tuple(
-    (parent, node) for node, parent in enumerate(NODE_PARENTS) if parent >= 0
-)
 
 
 @dataclass(frozen=True, kw_only=True)

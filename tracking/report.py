@@ -43,7 +43,8 @@ from recon.workspace import (
     write_json_atomic,
 )
 from tracking.anthropometry import Sex, body_segments, default_body_mass
-from tracking.body import N_POSE_PARAMS, NODE_NAMES, NODE_PARENTS, BodyShape
+from tracking.body import BONES, N_POSE_PARAMS, NODE_NAMES
+from tracking.body_motion import read_pose_file
 from tracking.bvh import CMU_METRES_PER_UNIT
 from tracking.dynamics import ASSUMPTIONS, JointLoads, inverse_dynamics
 from tracking.kinematics import (
@@ -212,49 +213,21 @@ def sequence_from_bvh(
 
 
 def read_pose_track(path: Path, max_frames: int | None = None) -> MotionSequence:
-    """The sequence in a tracking workspace's ``tracks/pose.json``.
-
-    Assumed format (written by `mocap track`)::
-
-        {"frame_rate": 25.0,
-         "shape": {<every BodyShape field>: metres, ...},
-         "frames": [{"frame": 0, "params": [24 floats in POSE_LAYOUT order]},
-                    {"frame": 1, "params": null}, ...]}
+    """The sequence in a tracking workspace's ``tracks/pose.json`` (format: see
+    `tracking.body_motion.read_pose_file`).
 
     ``params`` null (or containing NaN) marks a frame the tracker lost; frame numbers missing
-    from the list are lost frames too. Frames are sorted by number.
+    from the list are lost frames too.
     """
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except OSError as exc:
-        raise UserError(f"cannot read {path}: {exc.strerror}") from None
-    except json.JSONDecodeError as exc:
-        raise UserError(f"{path} is not valid JSON ({exc})") from None
-    try:
-        frame_rate = float(data["frame_rate"])
-        shape = BodyShape(**{k: float(v) for k, v in data["shape"].items()})
-        entries = sorted(data["frames"], key=lambda e: int(e["frame"]))
-    except (KeyError, TypeError, ValueError) as exc:
-        raise UserError(f"{path}: not a pose track ({exc!s}); expected frame_rate, shape and "
-                        "frames") from None
-    if not entries:
-        raise UserError(f"{path} holds no frames")
-    first = int(entries[0]["frame"])
-    count = int(entries[-1]["frame"]) - first + 1
+    frame_rate, shape, entries = read_pose_file(path)
+    first = entries[0][0]
+    count = entries[-1][0] - first + 1
     if max_frames is not None:
         count = min(count, max_frames)
     params = np.full((count, N_POSE_PARAMS), np.nan)
-    for entry in entries:
-        k = int(entry["frame"]) - first
-        values = entry.get("params")
-        if values is None or k >= count:
-            continue
-        row = np.asarray(values, dtype=float)
-        if row.shape != (N_POSE_PARAMS,):
-            raise UserError(f"{path}: frame {entry['frame']} has {row.size} pose parameters, "
-                            f"not {N_POSE_PARAMS}")
-        params[k] = row
+    for frame, row in entries:
+        if row is not None and frame - first < count:
+            params[frame - first] = row
     return MotionSequence.from_poses(params, shape, frame_rate, first, source=str(path))
 
 
@@ -694,10 +667,9 @@ def log_report(path: Path, kin: Kinematics, loads: JointLoads) -> None:
     )
 
     frames, times = kin.frames, kin.times_s
-    bones = [(p, i) for i, p in enumerate(NODE_PARENTS) if p >= 0]
     with step_recording(path, "report") as rec:
         log_y_up_world(rec)
-        log_skeleton_frames(rec, "world/skeleton", frames, times, kin.joint_centres, bones)
+        log_skeleton_frames(rec, "world/skeleton", frames, times, kin.joint_centres, BONES)
         log_skeleton_frames(rec, "world/center_of_mass", frames, times, kin.com[:, None], [],
                             radius=0.04)  # fmt: skip
         for j, joint in enumerate(ANGLE_JOINTS):

@@ -55,7 +55,7 @@ import numpy as np
 
 from recon.errors import UserError
 from recon.workspace import Timer, Workspace, atomic_output, fingerprint, write_json_atomic
-from tracking.body import NODE_NAMES, NODE_PARENTS, BodyModel, BodyShape, Pose, forward_kinematics
+from tracking.body import BONES, NODE_NAMES, BodyModel, BodyShape, Pose, forward_kinematics
 from tracking.bvh import CMU_METRES_PER_UNIT, Motion, read_bvh
 from tracking.cameras import Camera, ring_cameras, write_cameras_json
 from tracking.render import DEFAULT_RENDERER
@@ -517,8 +517,7 @@ def synthesize(ws_root: Path | str, config: SynthConfig, *,
                         raise UserError(f"could not write {path}")
                     log_silhouette(rec, f"world/cameras/{camera.name}/image", mask, int(k),
                                    float(times_s[k]))
-            bones = [(p, i) for i, p in enumerate(NODE_PARENTS) if p >= 0]
-            log_skeleton_frames(rec, "world/gt", frames, times_s, joints, bones)
+            log_skeleton_frames(rec, "world/gt", frames, times_s, joints, BONES)
             _write_truth(gt_dir, poses, shape, joints, clip_frames, frame_rate, config)
             write_cameras_json(ws.cameras_path, cameras)
 

@@ -18,7 +18,6 @@ from __future__ import annotations
 import csv
 import dataclasses
 import io
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,12 +26,13 @@ import cv2
 import numpy as np
 
 from recon.errors import UserError
+from recon.progress import bar as progress_bar
 from recon.workspace import Timer, Workspace, atomic_output, fingerprint, write_json_atomic
-from tracking.body import NODE_NAMES, NODE_PARENTS, BodyModel, BodyShape, Pose
+from tracking.body import BONES, NODE_NAMES, BodyModel, BodyShape, Pose
 from tracking.body import node_positions_in_world as _nodes
+from tracking.body_motion import read_pose_file
+from tracking.render import render_views
 from tracking.tracker import FrameResult, SilhouetteTracker, TrackConfig
-
-_BONES = tuple((parent, node) for node, parent in enumerate(NODE_PARENTS) if parent >= 0)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -45,18 +45,6 @@ class TrackStepConfig:
     )  # fmt: skip
     first: int = field(default=0, metadata={"help": "first frame to track"})
     last: int | None = field(default=None, metadata={"help": "last frame to track (inclusive)"})
-
-
-def read_pose_json(path: Path) -> tuple[BodyShape, list[tuple[int, Pose | None]], float]:
-    """Shape, (frame, pose or None) and frame rate of a tracks/pose.json-layout file."""
-    try:
-        data = json.loads(Path(path).read_text())
-        shape = BodyShape(**data["shape"])
-        frames = [(int(f["frame"]), None if f["params"] is None else Pose(f["params"]))
-                  for f in data["frames"]]  # fmt: skip
-        return shape, frames, float(data.get("frame_rate", 30.0))
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise UserError(f"{path}: not a pose file ({exc})") from None
 
 
 def frame_rate_of(ws: Workspace) -> float:
@@ -112,8 +100,8 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         raise UserError(f"no silhouette frames between {step.first} and {step.last}")
     init_shape, init_pose = None, None
     if step.init_pose is not None:
-        init_shape, poses, _ = read_pose_json(step.init_pose)
-        init_pose = next((p for _, p in poses if p is not None), None)
+        _, init_shape, poses = read_pose_file(step.init_pose)
+        init_pose = next((Pose(p) for _, p in poses if p is not None), None)
         if init_pose is None:
             raise UserError(f"{step.init_pose}: has no pose")
     upstream = [ws.step(n).fingerprint for n in ("synth", "silhouettes") if ws.step(n)]
@@ -128,7 +116,7 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
     tracker = SilhouetteTracker(cameras, config, shape=init_shape)
     results: list[FrameResult] = []
     with Timer() as timer, _Recorder(ws, cameras, frame_rate) as recorder:
-        bar = _progress(len(frames), progress)
+        bar = progress_bar(len(frames), "track", "frame", enabled=progress)
         for index, frame in enumerate(frames):
             masks = [_read_mask(ws.silhouettes_dir / c.name / f"{frame:06d}.png", c)
                      for c in cameras]  # fmt: skip
@@ -153,15 +141,6 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
     }
     ws.record_step("track", fp, config=settings, seconds=timer.seconds, summary=summary)
     return summary
-
-
-def _progress(total: int, enabled: bool) -> Any:
-    import sys
-
-    from tqdm import tqdm
-
-    return tqdm(total=total, unit="frame", desc="track", disable=not (enabled and
-                                                                      sys.stderr.isatty()))
 
 
 def _write_outputs(outputs: dict[str, Path], results: list[FrameResult], shape: BodyShape,
@@ -211,7 +190,7 @@ class _Recorder:
         self._context = recording.step_recording(self.ws.log_path("track"), "track")
         self.rec = self._context.__enter__()
         recording.log_y_up_world(self.rec)
-        recording.log_skeleton_context(self.rec, "world/body/skeleton", NODE_NAMES, _BONES)
+        recording.log_skeleton_context(self.rec, "world/body/skeleton", NODE_NAMES, BONES)
         for cam in self.cameras:
             recording.log_camera_image(self.rec, image_name=cam.name, image_path=None, K=cam.K,
                                        width=cam.width, height=cam.height,
@@ -226,11 +205,11 @@ class _Recorder:
                 r.log_frame_scalar(self.rec, "track/xor_fraction", result.xor_fraction,
                                    result.frame, t)  # fmt: skip
             return
-        model_masks = tracker._energy(masks).model_masks(result.pose)
+        vertices = tracker.model.posed_vertices(result.pose)
+        model_masks = render_views(tracker.renderer, vertices, tracker.model.faces, self.cameras)
         for cam, image, model in zip(self.cameras, masks, model_masks, strict=True):
             base = f"world/cameras/{r.entity_name(cam.name)}/image"
             r.log_xor_overlay(self.rec, f"{base}/xor", model, image, result.frame, t)
-        vertices = tracker.model.posed_vertices(result.pose)
         r.log_mesh_frame(self.rec, "world/body/mesh", vertices, tracker.model.faces,
                          result.frame, t)  # fmt: skip
         joints = np.array([p for p in _nodes(result.pose, tracker.shape).values()])

@@ -481,6 +481,7 @@ class SilhouetteTracker:
             if not self.history:
                 pose, event = self.initialise(masks, init)
                 x = pose.params
+                energy = self._energy(masks)  # the model exists (and is fixed) from here on
             else:
                 energy = self._energy(masks)
                 predicted, change = self._prediction()
@@ -488,7 +489,6 @@ class SilhouetteTracker:
                 for _ in range(self.config.passes - 1):
                     # Another pass from the result, with the ranges of a small change.
                     x = self._refine_all(energy, x, change=np.abs(x - predicted) / 2)
-            energy = self._energy(masks)
             e = energy(Pose(x))
             if event:
                 # What the silhouettes allow: real masks have holes and ghosts, so the first
