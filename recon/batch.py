@@ -9,8 +9,10 @@ schedulers and the cloud; this module only describes the work as tasks:
   by side; tracking, sequential in time, stays one task per sequence; a step that does not
   apply to a workspace is skipped with its reason (a synthetic workspace's silhouettes are
   given), which fails nothing;
-* within a ``silhouettes`` task, each camera (background model, decoding, masks) is a task of
-  its own (:func:`tracking.silhouettes_step.cameras_mapped_by`);
+* within a ``silhouettes`` task, each camera's background model is a task of its own, then
+  each run of about a dozen of a camera's frames (decoding, classification, masks) is one, the
+  models sent once to the workers as :func:`map_ordered`'s shared argument
+  (:func:`tracking.silhouettes_step.cameras_mapped_by`), submitted from the worker;
 * within a ``dense`` task, the stereo pairs of the cpu-stereo backend are tasks of their own
   (:func:`recon.backends.stereo_pairs_mapped_by`), submitted from the worker;
 * :func:`map_ordered` and :func:`silhouettes_parallel` give the same per-item fan-out to other
@@ -110,8 +112,10 @@ class BatchConfig:
     )
     pair_tasks: bool = field(
         default=True,
-        metadata={"help": "run the dense stereo pairs, and the silhouettes of each camera, of "
-                  "a workspace as tasks of their own (--no-pair-tasks: inside its step's task)"},
+        metadata={"help": "run the dense stereo pairs, and the silhouettes (a task per "
+                  "camera's background model, then per run of about 12 of a camera's frames), "
+                  "of a workspace as tasks of their own (--no-pair-tasks: inside its step's "
+                  "task)"},
     )
 
     def __post_init__(self) -> None:
@@ -260,8 +264,9 @@ def _map_on_this_cluster(fn: Callable[..., Any], items: Sequence[Any], *shared: 
     """:func:`map_ordered` from inside a task, on the cluster that runs it.
 
     ``worker_client`` secedes the calling task from the worker's thread pool only while it
-    waits, so its pair tasks can run on the same worker without a deadlock. They go before
-    other workspaces' waiting steps: a started step finishes first and frees its memory.
+    waits, so its tasks (stereo pairs; silhouettes: background models, then runs of frames,
+    two calls) can run on the same worker without a deadlock. They go before other
+    workspaces' waiting steps: a started step finishes first and frees its memory.
     """
     from distributed import worker_client
 

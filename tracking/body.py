@@ -33,7 +33,7 @@ Conventions (those of `tracking.bvh`):
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -303,6 +303,42 @@ class BodyShape:
             thigh_radius=0.050 * h,
             shank_radius=0.034 * h,
         )
+
+
+SHAPE_GROUPS: tuple[tuple[str, ...], ...] = (
+    ("thigh",),
+    ("shank",),
+    ("ankle_height",),
+    ("pelvis_to_spine",),
+    ("spine_to_neck",),
+    ("neck_to_head_top",),
+    ("upper_arm",),
+    ("forearm",),
+    ("hand",),
+    ("foot_length",),
+    ("shoulder_half_width",),
+    ("hip_half_width",),
+    ("pelvis_half_width", "trunk_half_depth", "chest_half_width"),
+    ("head_half_width",),
+    ("upper_arm_radius", "forearm_radius"),
+    ("thigh_radius", "shank_radius"),
+)  # fmt: skip
+"""Groups of BodyShape fields scaled together when the shape is estimated from silhouettes
+(`scaled_shape`): the lengths one by one, the girths by body part."""
+
+
+def scaled_shape(base: BodyShape, scales: np.ndarray) -> BodyShape:
+    """`base` with each group of `SHAPE_GROUPS` multiplied by its scale; the height follows
+    the scaled chain of lengths (sole to head top)."""
+    values = {name: getattr(base, name) * float(k)
+              for group, k in zip(SHAPE_GROUPS, scales, strict=True)
+              for name in group}  # fmt: skip
+    lengths = {**{f: getattr(base, f) for f in ("thigh", "shank", "ankle_height",
+                                                "pelvis_to_spine", "spine_to_neck",
+                                                "neck_to_head_top")}, **values}  # fmt: skip
+    height = sum(lengths[f] for f in ("thigh", "shank", "ankle_height", "pelvis_to_spine",
+                                      "spine_to_neck", "neck_to_head_top"))  # fmt: skip
+    return replace(base, **values, height=height)
 
 
 def rest_offsets(shape: BodyShape) -> np.ndarray:

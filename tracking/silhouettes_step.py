@@ -22,6 +22,10 @@ camera the foreground fraction (min / median / max over frames) and lists frames
 silhouette is empty or touches the image border (the subject leaving the view); these are
 warnings, printed by the CLI. All masks go to ``silhouettes.partial/`` first, which replaces
 ``silhouettes/`` only when every camera is done.
+
+Under `mocap batch` (:func:`cameras_mapped_by`) the background models are a task per camera and
+the classification a task per run of about a dozen frames of a camera (:func:`frame_chunks`),
+with the very results of a plain run, which does one camera after the other in its process.
 """
 
 from __future__ import annotations
@@ -29,8 +33,9 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import dataclasses
+import itertools
 import re
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -230,7 +235,7 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
                            thresholds=config.thresholds, out=tmp.resolve() / camera.name,
                            logged=frozenset(logged)) for camera in cameras]
         if map_cameras is not None:
-            done_cameras = map_cameras(camera_silhouettes, jobs)
+            done_cameras = _silhouettes_as_tasks(map_cameras, jobs)
         else:  # one camera after the other in this process, logged as each one finishes
             done_cameras = (camera_silhouettes(job, progress) for job in jobs)
         for camera, result in zip(cameras, done_cameras, strict=True):
@@ -271,27 +276,59 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
 
 
 CameraMap = Callable[..., list[Any]]
-"""``map_fn(fn, items)`` returning ``[fn(item) for item in items]`` in input order, however it
-runs them (:func:`recon.batch.map_ordered` runs them as Dask tasks)."""
+"""``map_fn(fn, items, *shared)`` returning ``[fn(item, *shared) for item in items]`` in input
+order, however it runs them (:func:`recon.batch.map_ordered` runs them as Dask tasks, ``shared``
+sent once rather than with every task)."""
 
 # Unset (None) in a plain run: the cameras are processed one after another in this process.
 _camera_map: contextvars.ContextVar[CameraMap | None] = contextvars.ContextVar(
     "silhouette_camera_map", default=None)
 
+FRAME_CHUNK = 12
+"""Processed frames of one camera per classification task under `mocap batch`, at most unless a
+long sequence needs longer runs (:func:`frame_chunks`): 1088x1920 frames take ~75 ms each to
+classify, so a task is about a second."""
+_REDECODED_PER_FRAME = 4
+"""Budget of :func:`frame_chunks`: video frames decoded again, over all of a camera's tasks, per
+processed frame. A task reads its frames with :func:`tracking.video.read_frames`, which decodes
+(without converting) every frame before its first one: exact whatever the video's timestamps,
+where seeking trusts them. Such a frame costs ~3 ms against ~80 ms to decode, convert and
+classify a processed one (H.264 1088x1920, the Pose2Sim demo, one thread), so the budget bounds
+the extra work at about 15% however long the sequence."""
+
 
 @contextlib.contextmanager
 def cameras_mapped_by(map_fn: CameraMap) -> Iterator[None]:
-    """Within this block, :func:`make_silhouettes` hands each camera's work (background model,
-    decoding, classification, writing its masks into the partial folder) to ``map_fn``.
+    """Within this block, :func:`make_silhouettes` hands its work to ``map_fn`` in two fan-outs:
+    the background model of each camera (:func:`camera_background`, a task per camera), then the
+    classification of each camera's frames in consecutive runs (:func:`frame_silhouettes`, a
+    task per run of :func:`frame_chunks`, every camera's runs in one fan-out), each writing its
+    masks into the partial folder, with the cameras' models as ``map_fn``'s shared argument.
 
-    Like :func:`recon.backends.stereo_pairs_mapped_by`: how the cameras are scheduled changes
-    no output; the masks still replace ``silhouettes/`` only when every camera is done.
+    Like :func:`recon.backends.stereo_pairs_mapped_by`: how the work is scheduled changes no
+    output; the results are merged in camera and frame order, as a plain run makes them, and
+    the masks still replace ``silhouettes/`` only when every task is done.
     """
     token = _camera_map.set(map_fn)
     try:
         yield
     finally:
         _camera_map.reset(token)
+
+
+def frame_chunks(frames: list[int]) -> list[list[int]]:
+    """``frames`` (one camera's processed frame indexes, increasing) split into consecutive runs
+    of at most :data:`FRAME_CHUNK`, as even as can be; fewer, longer runs when so many would
+    decode the video's early frames again too often (:data:`_REDECODED_PER_FRAME`): a run
+    starting at frame s decodes the s frames before it, so n runs decode about (n - 1) / 2 times
+    the video up to the last processed frame more than a single run does."""
+    if not frames:
+        return []
+    count = -(-len(frames) // FRAME_CHUNK)
+    affordable = 1 + 2 * _REDECODED_PER_FRAME * len(frames) // (frames[-1] + 1)
+    count = max(1, min(count, affordable))
+    bounds = [len(frames) * k // count for k in range(count + 1)]
+    return [frames[a:b] for a, b in itertools.pairwise(bounds)]
 
 
 @dataclass(frozen=True)
@@ -307,6 +344,37 @@ class _CameraJob:
     out: Path
     logged: frozenset[int]
 
+    def frames_job(self, frames: list[int], model: int = 0) -> _FramesJob:
+        """The classification of ``frames`` (some of ``self.frames``) against the ``model``-th
+        of the background models given with it."""
+        return _FramesJob(root=self.root, camera=self.camera, frames=frames,
+                          thresholds=self.thresholds, out=self.out,
+                          logged=self.logged & frozenset(frames), model=model)
+
+
+@dataclass(frozen=True)
+class _FramesJob:
+    """Some of one camera's processed frames to classify (all of them in a plain run, one run
+    of :func:`frame_chunks` under `mocap batch`); small and picklable."""
+
+    root: Path
+    camera: Camera
+    frames: list[int]
+    thresholds: SilhouetteConfig
+    out: Path
+    logged: frozenset[int]
+    model: int
+    """Which of the background models given with the job is this camera's."""
+
+
+@dataclass(frozen=True)
+class _FramesResult:
+    fractions: list[float]
+    empty: list[int]
+    border: list[int]
+    logged: list[tuple[int, np.ndarray, np.ndarray]]
+    """(frame index, frame, mask) of the frames to log."""
+
 
 @dataclass(frozen=True)
 class _CameraResult:
@@ -318,24 +386,45 @@ class _CameraResult:
     logged: list[tuple[int, np.ndarray, np.ndarray]]
     """(frame index, frame, mask) of the frames to log."""
 
+    @classmethod
+    def merged(cls, model: BackgroundModel, parts: list[_FramesResult]) -> _CameraResult:
+        """One camera's result from its runs' results, given in frame order."""
+        return cls(np.clip(model.mean, 0, 255).astype(np.uint8),
+                   [f for p in parts for f in p.fractions], [i for p in parts for i in p.empty],
+                   [i for p in parts for i in p.border], [x for p in parts for x in p.logged])
+
 
 def camera_silhouettes(job: _CameraJob, progress: Any = None) -> _CameraResult:
-    """The masks of one camera's frames written to ``job.out``: one independent task."""
+    """The masks of one camera's frames written to ``job.out``, all in this process: its
+    background model, then its frames in order (what a plain `mocap silhouettes` runs)."""
+    if progress is not None:
+        progress.set_postfix_str(f"{job.camera.name}: background")
+    model = camera_background(job)
+    if progress is not None:
+        progress.set_postfix_str(job.camera.name)
+    job.out.mkdir()
+    return _CameraResult.merged(model, [frame_silhouettes(job.frames_job(job.frames), [model],
+                                                          progress)])
+
+
+def camera_background(job: _CameraJob) -> BackgroundModel:
+    """The background model of one camera: one independent task."""
+    return _background(Workspace(job.root), job.camera, job.background_frames, median=job.median)
+
+
+def frame_silhouettes(job: _FramesJob, models: Sequence[BackgroundModel], progress: Any = None
+                      ) -> _FramesResult:  # fmt: skip
+    """The masks of ``job.frames`` written to ``job.out`` (which exists), classified against
+    ``models[job.model]``: one independent task."""
     ws = Workspace(job.root)
-    camera = job.camera
-    if progress is not None:
-        progress.set_postfix_str(f"{camera.name}: background")
-    model = _background(ws, camera, job.background_frames, median=job.median)
-    if progress is not None:
-        progress.set_postfix_str(camera.name)
+    model = models[job.model]
+    box = content_box(ws, job.camera)
     out = job.out
-    out.mkdir()
-    box = content_box(ws, camera)
     fractions: list[float] = []
     empty: list[int] = []
     border: list[int] = []
     logged = []
-    for index, frame in read_frames(ws, camera.name, job.frames):
+    for index, frame in read_frames(ws, job.camera.name, job.frames):
         mask = silhouette_from_frame(frame, model, job.thresholds)
         if not cv2.imwrite(str(out / f"{index:06d}.png"), mask.astype(np.uint8) * 255):
             raise UserError(f"could not write {out / f'{index:06d}.png'}")
@@ -349,8 +438,20 @@ def camera_silhouettes(job: _CameraJob, progress: Any = None) -> _CameraResult:
             logged.append((index, frame, mask))
         if progress is not None:
             progress.update()
-    return _CameraResult(np.clip(model.mean, 0, 255).astype(np.uint8), fractions, empty,
-                         border, logged)
+    return _FramesResult(fractions, empty, border, logged)
+
+
+def _silhouettes_as_tasks(map_fn: CameraMap, jobs: list[_CameraJob]) -> list[_CameraResult]:
+    """:func:`camera_silhouettes` of every job, as the fan-outs of :func:`cameras_mapped_by`."""
+    models = map_fn(camera_background, jobs)
+    for job in jobs:
+        job.out.mkdir()
+    runs = [frame_chunks(job.frames) for job in jobs]
+    results = iter(map_fn(frame_silhouettes, [
+        job.frames_job(frames, model=k) for k, job in enumerate(jobs) for frames in runs[k]],
+        tuple(models)))
+    return [_CameraResult.merged(model, [next(results) for _ in camera_runs])
+            for model, camera_runs in zip(models, runs, strict=True)]
 
 
 def _background(ws: Workspace, camera: Camera, indexes: list[int], *, median: bool

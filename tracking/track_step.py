@@ -32,7 +32,7 @@ from tracking.body import BONES, NODE_NAMES, BodyModel, BodyShape, Pose
 from tracking.body import node_positions_in_world as _nodes
 from tracking.body_motion import read_pose_file
 from tracking.render import render_views
-from tracking.tracker import FrameResult, SilhouetteTracker, TrackConfig
+from tracking.tracker import FrameResult, SilhouetteTracker, TrackConfig, TrackingLost
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -115,11 +115,23 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
     frame_rate = frame_rate_of(ws)
     tracker = SilhouetteTracker(cameras, config, shape=init_shape)
     results: list[FrameResult] = []
+
+    def masks_of(frame: int) -> list[np.ndarray]:
+        return [_read_mask(ws.silhouettes_dir / c.name / f"{frame:06d}.png", c) for c in cameras]
+
     with Timer() as timer, _Recorder(ws, cameras, frame_rate) as recorder:
+        if init_shape is None and config.shape_frames > 1:
+            shape_frames = frames[:config.shape_frames]
+            bar = progress_bar(len(shape_frames), "shape", "frame", enabled=progress)
+            try:
+                init_pose = tracker.calibrate_shape(
+                    [masks_of(f) for f in shape_frames], progress=bar.update)
+            except TrackingLost as exc:
+                raise UserError(f"cannot start tracking at frame {frames[0]}: {exc}") from None
+            bar.close()
         bar = progress_bar(len(frames), "track", "frame", enabled=progress)
         for index, frame in enumerate(frames):
-            masks = [_read_mask(ws.silhouettes_dir / c.name / f"{frame:06d}.png", c)
-                     for c in cameras]  # fmt: skip
+            masks = masks_of(frame)
             result = tracker.track(frame, masks, init=init_pose if index == 0 else None)
             results.append(result)
             recorder.frame(tracker, result, masks)

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import minimize
@@ -42,11 +42,13 @@ from tracking.body import (
     NODE_INDEX,
     PARAM_INDEX,
     PARAM_MOVES_NODE,
+    SHAPE_GROUPS,
     UPPER_LIMITS,
     BodyModel,
     BodyShape,
     Pose,
     forward_kinematics,
+    scaled_shape,
 )
 from tracking.cameras import Camera
 from tracking.energy import SilhouetteEnergy
@@ -73,33 +75,6 @@ _TWISTS = [PARAM_INDEX[f"{side}_{joint}_ry"] for side in ("l", "r")
            for joint in ("shoulder", "hip")]  # fmt: skip
 
 
-# Groups of BodyShape lengths scaled together when the shape is estimated from silhouettes.
-_SHAPE_GROUPS: tuple[tuple[str, ...], ...] = (
-    ("thigh", "shank"),
-    ("pelvis_to_spine",),
-    ("spine_to_neck",),
-    ("neck_to_head_top",),
-    ("upper_arm", "forearm"),
-    ("shoulder_half_width",),
-    ("pelvis_half_width", "trunk_half_depth", "chest_half_width", "head_half_width",
-     "upper_arm_radius", "forearm_radius", "thigh_radius", "shank_radius"),
-)  # fmt: skip
-
-
-def scaled_shape(base: BodyShape, scales: np.ndarray) -> BodyShape:
-    """`base` with each group of `_SHAPE_GROUPS` multiplied by its scale; the height follows
-    the scaled chain of lengths (sole to head top)."""
-    values = {name: getattr(base, name) * float(k)
-              for group, k in zip(_SHAPE_GROUPS, scales, strict=True)
-              for name in group}  # fmt: skip
-    lengths = {**{f: getattr(base, f) for f in ("thigh", "shank", "ankle_height",
-                                                "pelvis_to_spine", "spine_to_neck",
-                                                "neck_to_head_top")}, **values}  # fmt: skip
-    height = sum(lengths[f] for f in ("thigh", "shank", "ankle_height", "pelvis_to_spine",
-                                      "spine_to_neck", "neck_to_head_top"))  # fmt: skip
-    return replace(base, **values, height=height)
-
-
 @dataclass(frozen=True, kw_only=True)
 class TrackConfig:
     levels: int = field(default=3, metadata={"help": "image pyramid levels (1 = full size)"})
@@ -107,7 +82,7 @@ class TrackConfig:
         default=1, metadata={"help": "pyramid level of the grid searches (0 = full size)"}
     )
     prior_weight: float = field(
-        default=0.02,
+        default=0.0,
         metadata={"help": "temporal prior: cost of one prior scale of deviation from the "
                   "predicted pose, as a fraction of the silhouette area (0 = pure XOR)"},
     )  # fmt: skip
@@ -147,9 +122,19 @@ class TrackConfig:
         metadata={"help": "a frame whose XOR area exceeds this fraction of the silhouette "
                   "area is a divergence: re-initialise"},
     )  # fmt: skip
-    init_rounds: int = field(
-        default=3,
-        metadata={"help": "rounds of (pose refinement, height choice) at initialisation"},
+    init_shape: bool = field(
+        default=True,
+        metadata={"help": "estimate the segment lengths at initialisation when the shape is "
+                  "unknown (off: the standard proportions of the visual hull's height)"},
+    )  # fmt: skip
+    shape_frames: int = field(
+        default=24,
+        metadata={"help": "frames of the shape pass before tracking when the shape is "
+                  "unknown: they are tracked, then the segment lengths are refined over every "
+                  "--shape-stride-th of them at once (<= 1: the first frame's shape only)"},
+    )  # fmt: skip
+    shape_stride: int = field(
+        default=4, metadata={"help": "frame stride of the shape pass's joint refinement"}
     )
     init_simplex_evals: int = field(
         default=120, metadata={"help": "evaluations of each simplex at initialisation"}
@@ -158,6 +143,11 @@ class TrackConfig:
     hull_size_m: float = field(
         default=2.6, metadata={"help": "side of the visual-hull cube around the subject, metres"}
     )
+    contour_iterations: int = field(
+        default=8,
+        metadata={"help": "iterations of the joint refinement of all parameters against the "
+                  "silhouette outlines after the hierarchy (tracking.contour; 0 = off)"},
+    )  # fmt: skip
     renderer: str = field(
         default="cpu-raster", metadata={"help": "silhouette renderer plugin (mocap plugins)"}
     )
@@ -299,18 +289,16 @@ class SilhouetteTracker:
                 raise TrackingLost("the silhouettes do not intersect in a visual hull")
             fit = fit_body(points, FitConfig(min_inlier_fraction=0.0, max_median_residual=1.0),
                            up=_rig_up(self.cameras, points.mean(axis=0)))
-            init = fit.pose
-            if self.shape is None:
+            estimate_shape = self.shape is None
+            if estimate_shape:
+                self.shape = BodyShape.default(fit.shape.height)
+                self.model = BodyModel(self.shape)
+            init = self._best_hypothesis(masks, fit.pose.params)
+            if estimate_shape and self.config.init_shape:
                 # Few views carve a hull larger than the body, and people differ in
-                # proportions: alternately refine the pose and the segment lengths against the
-                # silhouettes (the scale parameters, fixed afterwards: thesis 6.2.4).
-                base = BodyShape.default(fit.shape.height)
-                scales = np.ones(len(_SHAPE_GROUPS))
-                self.shape = base
-                self.model = BodyModel(base)
-                for _ in range(self.config.init_rounds):
-                    init = Pose(self._refine_all(self._energy(masks), init.params, init=True))
-                    scales, init = self._refine_shape(masks, base, scales, init)
+                # proportions: the segment lengths from the silhouettes' outlines, with the
+                # pose (fixed afterwards: thesis 6.2.4).
+                init = self._refine_shape([masks], [init])[0]
             message = f"init from visual hull ({len(points)} surface voxels)"
         else:
             if self.shape is None:
@@ -320,30 +308,77 @@ class SilhouetteTracker:
         x = self._refine_all(self._energy(masks), init.params.copy(), init=True)
         return Pose(x), message
 
-    def _refine_shape(self, masks: Sequence[np.ndarray], base: BodyShape, scales: np.ndarray,
-                      pose: Pose) -> tuple[np.ndarray, Pose]:  # fmt: skip
-        """Segment-length scales and the root, by simplex on the silhouette energy."""
+    def _best_hypothesis(self, masks: Sequence[np.ndarray], x: np.ndarray) -> Pose:
+        """The visual hull cannot tell which leg (or arm) is which: of the pose and its
+        left/right swaps of the legs, the arms, and both, the one whose outline refinement
+        ends with the lowest XOR energy."""
+        from tracking.contour import ContourConfig, ContourRefiner
+
         level = self.config.search_level
-        n = len(scales)
+        energy = self._energy(masks)
+        refiner = ContourRefiner(energy.model, energy.cameras[level], energy.masks[level],
+                                 energy.renderer, ContourConfig(iterations=20))  # fmt: skip
+        best, best_e = x, np.inf
+        for start in (x, swap_sides(x, "leg"), swap_sides(x, "arm"),
+                      swap_sides(swap_sides(x, "leg"), "arm")):  # fmt: skip
+            y, e, n = refiner.refine(start, np.arange(N_POSE_PARAMS),
+                                     lambda p: energy(Pose(p), level))  # fmt: skip
+            self.evaluations += n
+            if e < best_e:
+                best, best_e = y, e
+        return Pose(best)
 
-        def energy_of(values: np.ndarray) -> float:
-            shape = scaled_shape(base, values[:n])
-            energy = SilhouetteEnergy(BodyModel(shape), self.cameras, masks, self.renderer,
-                                      levels=level + 1)  # fmt: skip
-            x = pose.params.copy()
-            x[_ROOT] = values[n:]
-            return energy(Pose(np.clip(x, LOWER_LIMITS, UPPER_LIMITS)), level)
+    def _refine_shape(self, sequence: Sequence[Sequence[np.ndarray]], poses: Sequence[Pose],
+                      iterations: int = 30) -> list[Pose]:  # fmt: skip
+        """Segment-length scales (`SHAPE_GROUPS`) and the poses of one or more frames
+        together, by Gauss-Newton on the silhouette outlines (`tracking.contour.refine_shape`);
+        sets the shape and returns the poses."""
+        from tracking.contour import ContourConfig, refine_shape
 
-        start = np.concatenate([scales, pose.params[_ROOT]])
-        steps = np.concatenate([np.full(n, 0.05), [0.03] * 3, [0.05] * 3])
-        lo = np.concatenate([np.full(n, 0.75), LOWER_LIMITS[_ROOT]])
-        hi = np.concatenate([np.full(n, 1.3), UPPER_LIMITS[_ROOT]])
-        values = _simplex(energy_of, start, steps, lo, hi, self.config.init_simplex_evals * 2)
-        self.shape = scaled_shape(base, values[:n])
+        assert self.shape is not None
+        level = self.config.search_level
+        base = self.shape
+        energies = [self._energy(masks) for masks in sequence]
+
+        def energy(model: BodyModel, xs: Sequence[np.ndarray]) -> float:
+            self.evaluations += len(xs)
+            return sum(SilhouetteEnergy(model, self.cameras, masks, self.renderer,
+                                        levels=level + 1)(Pose(x), level)
+                       for masks, x in zip(sequence, xs, strict=True))  # fmt: skip
+
+        scales, xs, _ = refine_shape(
+            base, np.ones(len(SHAPE_GROUPS)),
+            [(e.cameras[level], e.masks[level]) for e in energies], [p.params for p in poses],
+            self.renderer, energy, ContourConfig(iterations=iterations))
+        self.shape = scaled_shape(base, scales)
         self.model = BodyModel(self.shape)
-        x = pose.params.copy()
-        x[_ROOT] = values[n:]
-        return values[:n], Pose(np.clip(x, LOWER_LIMITS, UPPER_LIMITS))
+        return [Pose(x) for x in xs]
+
+    def calibrate_shape(self, sequence: Sequence[Sequence[np.ndarray]],
+                        progress: Callable[[], object] | None = None) -> Pose:
+        """The subject's shape from the first frames of a sequence (masks per frame), before
+        tracking it: the first frame is initialised (with its own shape estimate), the others
+        are tracked, and every `shape_stride`-th tracked frame's pose is refined together with
+        the segment lengths, which the silhouettes of several poses tell apart better than one.
+        Returns the first frame's pose with that shape; the tracker then starts afresh."""
+        cfg = self.config
+        if self.shape is not None:
+            raise ValueError("the shape is already known")
+        picked: list[tuple[Sequence[np.ndarray], Pose]] = []
+        for index, masks in enumerate(sequence):
+            result = self.track(index, masks)
+            if progress is not None:
+                progress()
+            if result.pose is None:
+                if index == 0:
+                    raise TrackingLost(result.event.removeprefix("lost: "))
+                break
+            if index % max(cfg.shape_stride, 1) == 0:
+                picked.append((masks, result.pose))
+        poses = self._refine_shape([m for m, _ in picked], [p for _, p in picked])
+        self.history = []
+        return Pose(self._refine_all(self._energy(picked[0][0]), poses[0].params.copy(),
+                                     init=True))
 
     # -- tracking -------------------------------------------------------------------------
     def _energy(self, masks: Sequence[np.ndarray]) -> SilhouetteEnergy:
@@ -456,6 +491,13 @@ class SilhouetteTracker:
             root_steps = np.clip(1.5 * change[_ROOT], [0.01] * 3 + [0.02] * 3,
                                  [0.08] * 3 + [0.15] * 3)  # fmt: skip
         evals = cfg.init_simplex_evals if init else cfg.simplex_evals
+        start = None
+        if cfg.contour_iterations:
+            # The outlines first: from a close start they reach the optimum on their own; the
+            # hierarchy's grids then look for larger motions, and the better of the two wins
+            # (the coarse levels of the hierarchy can leave a fine optimum).
+            x = self._contour(energy, x, cfg.final_level)
+            start = x.copy()
         for level in sorted({coarse, cfg.search_level}, reverse=True):
             x = self._stage(energy, x, _ROOT, root_steps, level, evals)
             root_steps = root_steps / 2
@@ -463,6 +505,29 @@ class SilhouetteTracker:
         for limb in _LIMBS:
             x = self._limb(energy, x, limb, change, cfg.search_level, wide=init)
         x = self._stage(energy, x, _ROOT, root_steps / 2, cfg.final_level, evals)
+        if start is not None:
+            x = self._contour(energy, x, cfg.final_level)
+            if self._objective(energy, start, cfg.final_level) < self._objective(
+                    energy, x, cfg.final_level):
+                x = start
+        return x
+
+    def _objective(self, energy: SilhouetteEnergy, x: np.ndarray, level: int) -> float:
+        """The XOR energy at `level` plus the temporal and twist priors."""
+        centre, weight = self._prior
+        return energy(Pose(x), level) + float(np.sum(weight * (x - centre) ** 2))
+
+    def _contour(self, energy: SilhouetteEnergy, x: np.ndarray, level: int) -> np.ndarray:
+        """All parameters at once against the silhouette outlines (`tracking.contour`), steps
+        accepted only when the XOR energy plus the temporal prior goes down."""
+        from tracking.contour import ContourConfig, ContourRefiner
+
+        refiner = ContourRefiner(energy.model, energy.cameras[level], energy.masks[level],
+                                 energy.renderer,
+                                 ContourConfig(iterations=self.config.contour_iterations))
+        x, _, evaluations = refiner.refine(x, np.arange(N_POSE_PARAMS),
+                                           lambda y: self._objective(energy, y, level))
+        self.evaluations += evaluations
         return x
 
     def track(self, frame: int, masks: Sequence[np.ndarray], init: Pose | None = None
@@ -515,6 +580,18 @@ class SilhouetteTracker:
         self.history = [*self.history[-1:], x]
         return FrameResult(frame, Pose(x), e, area, self.evaluations,
                            time.perf_counter() - start, event)  # fmt: skip
+
+
+def swap_sides(x: np.ndarray, limb: str) -> np.ndarray:
+    """Pose parameters with the left and right legs (limb "leg") or arms ("arm") exchanged:
+    flexion and the hinge carry over, abduction and twist change sign (they mirror)."""
+    x = np.array(x, dtype=float)
+    ball, hinge = ("shoulder", "elbow") if limb == "arm" else ("hip", "knee")
+    for name, sign in ((f"{ball}_rz", -1.0), (f"{ball}_rx", 1.0), (f"{ball}_ry", -1.0),
+                       (f"{hinge}_flex", 1.0)):  # fmt: skip
+        left, right = PARAM_INDEX[f"l_{name}"], PARAM_INDEX[f"r_{name}"]
+        x[left], x[right] = sign * x[right], sign * x[left]
+    return x
 
 
 class TrackingLost(Exception):

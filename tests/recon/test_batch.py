@@ -214,7 +214,7 @@ def test_serial_run_skips_the_steps_after_a_failure(tmp_path):
 
 
 # Video workspaces ---------------------------------------------------------------------------
-TRACK = TrackConfig(init_rounds=1, init_simplex_evals=40)  # small budgets: ~10 s a sequence
+TRACK = TrackConfig(init_simplex_evals=40)  # small budgets: ~10 s a sequence
 
 
 @pytest.mark.slow
@@ -254,15 +254,17 @@ def test_tracking_sequences_on_dask_equal_a_serial_run(cluster, tmp_path):
     assert skipped.steps[0].reason == "not a photo workspace (it has cameras.json)"
 
 
-def test_silhouettes_per_camera_on_dask_equal_a_serial_run(cluster, tmp_path):
-    """A real-video workspace: each camera's silhouettes as a task of its own give the very
-    masks (PNG bytes) and summary of the serial step."""
+def test_silhouettes_per_camera_and_frames_on_dask_equal_a_serial_run(cluster, tmp_path):
+    """A real-video workspace: a task per camera's background model, then a task per run of
+    frames of each camera, give the very masks (PNG bytes) and summary of the serial step."""
     from distributed import Client, get_task_stream
 
     from tests.tracking.test_video import make_blob_scene
+    from tracking.silhouettes_step import frame_chunks
     from tracking.video import init_video
 
-    videos, calibration, _ = make_blob_scene(tmp_path / "scene", cameras=3, frames=6)
+    cameras, frames = 3, 30
+    videos, calibration, _ = make_blob_scene(tmp_path / "scene", cameras=cameras, frames=frames)
     for kind in ("serial", "dask"):
         init_video(tmp_path / kind, videos, calibration)
     serial = run_workspace(tmp_path / "serial", (BatchStep.SILHOUETTES,))
@@ -272,12 +274,25 @@ def test_silhouettes_per_camera_on_dask_equal_a_serial_run(cluster, tmp_path):
     for result in (serial, report.results[0]):
         assert [(s.step, s.status) for s in result.steps] == [
             (BatchStep.SILHOUETTES, StepStatus.DONE)], result.line()
-    assert serial.steps[0].summary == report.results[0].steps[0].summary
-    camera_tasks = [t for t in stream.data if str(t["key"]).startswith("camera_silhouettes")]
-    assert len(camera_tasks) == 3
+    # Frames 0, 1, 28, 29 are empty and others touch the border: the runs' results were merged
+    # in frame order, as the serial loop lists them.
+    summary = serial.steps[0].summary
+    assert summary["cameras"]["cam00"]["empty_frames"] == [0, 1, 28, 29]
+    assert summary["cameras"]["cam00"]["border_frames"]
+    assert summary == report.results[0].steps[0].summary
+
+    keys = [str(t["key"]) for t in stream.data]
+    assert sum(k.startswith("camera_background-") for k in keys) == cameras
+    runs = frame_chunks(list(range(frames)))
+    assert [len(r) for r in runs] == [10, 10, 10]
+    # Each run of each camera ran as a task: more tasks than cameras classified frames.
+    assert sum(k.startswith("frame_silhouettes-") for k in keys) == cameras * len(runs) > cameras
+    assert not any(k.startswith("camera_silhouettes") for k in keys)
+
     a, b = (Workspace(tmp_path / kind).silhouettes_dir for kind in ("serial", "dask"))
     names = sorted(p.relative_to(a) for p in a.rglob("*.png"))
-    assert len(names) == 3 * 6 and names == sorted(p.relative_to(b) for p in b.rglob("*.png"))
+    assert len(names) == cameras * frames
+    assert names == sorted(p.relative_to(b) for p in b.rglob("*.png"))
     assert any(cv2.imread(str(a / n), cv2.IMREAD_GRAYSCALE).any() for n in names)
     for name in names:
         assert (a / name).read_bytes() == (b / name).read_bytes(), name

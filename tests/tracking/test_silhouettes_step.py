@@ -16,7 +16,12 @@ from tests.helpers import recording_entities, run_cli, shared_dataset
 from tests.tracking.test_video import FRAMES, HEIGHT, WIDTH, digest, make_blob_scene
 from tracking.cameras import read_cameras
 from tracking.silhouette import BackgroundModel
-from tracking.silhouettes_step import SilhouettesConfig, make_silhouettes, median_background
+from tracking.silhouettes_step import (
+    SilhouettesConfig,
+    frame_chunks,
+    make_silhouettes,
+    median_background,
+)
 from tracking.video import init_video
 
 
@@ -104,6 +109,26 @@ def test_frame_range_and_empty_background_frames(blob_workspace, tmp_path: Path)
         SilhouettesConfig(background="empty")
     with pytest.raises(UserError, match="not a video workspace"):
         make_silhouettes(Workspace(tmp_path), SilhouettesConfig())
+
+
+def test_frame_chunks_split_frames_into_runs_and_bound_the_redecoding():
+    """`mocap batch` classifies a camera's frames in runs; a run re-decodes the video up to its
+    first frame, so long sequences get fewer, longer runs: at most 4 frames decoded again per
+    processed one (a run starting at frame s decodes s frames before it; the serial loop does
+    that once, for the first run)."""
+    for frames in (list(range(100)), list(range(3000)), list(range(0, 3000, 2)), [7],
+                   list(range(24))):
+        runs = frame_chunks(frames)
+        assert [f for run in runs for f in run] == frames  # consecutive, in order, all
+        assert max(map(len, runs)) - min(map(len, runs)) <= 1
+        assert sum(run[0] for run in runs[1:]) <= 4 * len(frames)
+    assert sorted(len(r) for r in frame_chunks(list(range(100)))) == [11] * 8 + [12]
+    assert len(frame_chunks(list(range(24)))) == 2  # 12 frames a run when that is affordable
+    assert len(frame_chunks(list(range(3000)))) == 9  # ~333 a run, not 250 runs of 12
+    assert len(frame_chunks(list(range(0, 3000, 2)))) == 5  # every other frame: 5 runs
+    # Every 10th frame: a second run would decode 1505 frames again for 300 processed ones.
+    assert len(frame_chunks(list(range(5, 3000, 10)))) == 1
+    assert frame_chunks([]) == []
 
 
 def test_the_cli_reports_frames_without_subject_and_records_them(tmp_path: Path):
