@@ -443,10 +443,10 @@ def build_parser() -> argparse.ArgumentParser:
         "Dask cluster",
         description="Run the steps of every workspace as Dask tasks: on a LocalCluster "
         "sized to this machine, or on a running scheduler (--scheduler). Dense stereo "
-        "pairs, each camera's background model and each run of its frames' silhouettes are tasks of their own; tracking runs as one "
-        "task per sequence. A failed workspace is reported and the others go on; "
-        "a re-run reuses every finished step. Workspaces must be on a file system that every "
-        "worker sees at the same path.",
+        "pairs, each camera's background model and each run of its frames' silhouettes are "
+        "tasks of their own; tracking runs as one task per sequence. A failed workspace is "
+        "reported and the others go on; a re-run reuses every finished step. Workspaces "
+        "must be on a file system that every worker sees at the same path.",
     )
     p.add_argument("workspaces", type=Path, nargs="+", metavar="WS",
                    help="workspace folders (made with `mocap init`, `mocap init-video` or "

@@ -63,8 +63,11 @@ def _check_mesh(vertices_in_world: Any, faces: Any) -> tuple[np.ndarray, np.ndar
 
 
 @numba.njit(cache=True, nogil=True)
-def _fill_triangles(uv: np.ndarray, faces: np.ndarray, mask: np.ndarray) -> None:  # pragma: no cover
-    """Scanline fill (compiled): set every pixel of `mask` whose centre lies in a triangle."""
+def _fill_triangles(uv: np.ndarray, faces: np.ndarray, mask: np.ndarray, keep_winding: float
+                    ) -> None:  # fmt: skip
+    """Scanline fill (compiled): set every pixel of `mask` whose centre lies in a triangle.
+    keep_winding: 0 fills every triangle; +1 or -1 only those whose signed area in the image
+    has that sign (back-face culling done in the image, where it costs nothing)."""
     height, width = mask.shape
     for f in range(faces.shape[0]):
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
@@ -73,6 +76,10 @@ def _fill_triangles(uv: np.ndarray, faces: np.ndarray, mask: np.ndarray) -> None
         if not (np.isfinite(xs[0]) and np.isfinite(xs[1]) and np.isfinite(xs[2])
                 and np.isfinite(ys[0]) and np.isfinite(ys[1]) and np.isfinite(ys[2])):
             continue
+        if keep_winding != 0.0:
+            area = (xs[1] - xs[0]) * (ys[2] - ys[0]) - (xs[2] - xs[0]) * (ys[1] - ys[0])
+            if area * keep_winding < 0.0:
+                continue
         # Sort by y: top (t), middle (m), bottom (b).
         t, m, bo = 0, 1, 2
         if ys[m] < ys[t]:
@@ -92,10 +99,7 @@ def _fill_triangles(uv: np.ndarray, faces: np.ndarray, mask: np.ndarray) -> None
         for row in range(int(y0), int(y1) + 1):
             yc = row + 0.5
             x_long = tx + (yc - ty) * k_long
-            if yc < my:
-                x_short = tx + (yc - ty) * k_top
-            else:
-                x_short = mx + (yc - my) * k_bottom
+            x_short = tx + (yc - ty) * k_top if yc < my else mx + (yc - my) * k_bottom
             i0 = max(np.ceil(min(x_long, x_short) - 0.5), 0.0)
             i1 = min(np.floor(max(x_long, x_short) - 0.5), width - 1.0)
             for col in range(int(i0), int(i1) + 1):
@@ -103,13 +107,16 @@ def _fill_triangles(uv: np.ndarray, faces: np.ndarray, mask: np.ndarray) -> None
 
 
 def rasterize_triangles(uv: np.ndarray, faces: np.ndarray, width: int, height: int,
-                        out: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+                        out: np.ndarray | None = None, keep_winding: int = 0,
+                        ) -> np.ndarray:  # fmt: skip
     """(H, W) bool union of 2-D triangles: True where a pixel centre lies inside one.
 
     uv: (V, 2) pixel coordinates (pixel centres at +0.5); faces: (F, 3) indices. Points on an
     edge count as inside, so triangles sharing an edge leave no gap; either winding works;
     triangles with a non-finite vertex are skipped. `out`: an (H, W) bool mask to draw into
-    (it is returned), e.g. the silhouette of the parts that did not move.
+    (it is returned), e.g. the silhouette of the parts that did not move. keep_winding: 0
+    fills every triangle; +1 (-1) only those with a positive (negative) signed area in the
+    image, i.e. counter-clockwise (clockwise) on screen (y down).
 
     A scanline fill compiled by numba: every row whose centre line crosses a triangle is
     filled between its two edges, with no depth test (a silhouette is the union of the
@@ -121,13 +128,15 @@ def rasterize_triangles(uv: np.ndarray, faces: np.ndarray, width: int, height: i
         raise ValueError(f"out must be a ({height}, {width}) bool array")
     if len(faces):
         _fill_triangles(np.ascontiguousarray(uv, dtype=np.float64),
-                        np.ascontiguousarray(faces, dtype=np.int64), mask)  # fmt: skip
+                        np.ascontiguousarray(faces, dtype=np.int64), mask,
+                        float(np.sign(keep_winding)))  # fmt: skip
     return mask
 
 
 class CpuRasterRenderer(Plugin):
-    description = ("ours: union of projected triangles, pixel-centre rule, vectorised numpy on "
-                   "the CPU (no depth buffer; distortion through Camera.project)")
+    description = ("ours: union of projected triangles, pixel-centre rule, a scanline fill "
+                   "compiled by numba on the CPU (no depth buffer; distortion through "
+                   "Camera.project)")
 
     @dataclass(frozen=True, kw_only=True)
     class Options:
@@ -150,12 +159,12 @@ class CpuRasterRenderer(Plugin):
             with np.errstate(divide="ignore", invalid="ignore"):
                 r2 = (in_cam[:, 0] ** 2 + in_cam[:, 1] ** 2) / in_cam[:, 2] ** 2
             bad |= ~(r2 < camera.max_radius2)
-        keep = ~bad[tris].any(axis=1)
-        if self.options.cull_back_faces:
-            a, b, c = (vertices[tris[:, k]] for k in range(3))
-            normal = np.cross(b - a, c - a)
-            keep &= np.einsum("ij,ij->i", normal, camera.center_in_world - a) > 0
-        return rasterize_triangles(uv, tris[keep], camera.width, camera.height)
+        uv[bad] = np.nan  # the rasteriser skips triangles with a non-finite vertex
+        # A counter-clockwise face (outward normal) in front of the camera is clockwise on
+        # screen, where y points down: its signed area there is negative. The projection keeps
+        # orientation (distortion too, inside its monotonic radius), so this is the 3-D test.
+        return rasterize_triangles(uv, tris, camera.width, camera.height,
+                                   keep_winding=-1 if self.options.cull_back_faces else 0)
 
 
 def render_views(renderer: Any, vertices_in_world: Any, faces: Any,

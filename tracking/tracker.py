@@ -103,6 +103,10 @@ class TrackConfig:
     grid: int = field(
         default=3, metadata={"help": "grid samples per limb parameter (swing, lift, hinge)"}
     )
+    init_grid: int = field(
+        default=6,
+        metadata={"help": "grid samples per limb angle over its whole range at initialisation"},
+    )
     min_range_deg: float = field(
         default=8.0, metadata={"help": "smallest half-range of a limb grid, degrees"}
     )
@@ -115,7 +119,7 @@ class TrackConfig:
                   "preceding frames (thesis 6.2.5), clipped to the min/max range"},
     )  # fmt: skip
     simplex_evals: int = field(
-        default=40, metadata={"help": "evaluations of each downhill-simplex refinement"}
+        default=15, metadata={"help": "evaluations of each downhill-simplex refinement"}
     )
     max_xor_fraction: float = field(
         default=0.35,
@@ -148,6 +152,9 @@ class TrackConfig:
         metadata={"help": "iterations of the joint refinement of all parameters against the "
                   "silhouette outlines after the hierarchy (tracking.contour; 0 = off)"},
     )  # fmt: skip
+    contour_level: int = field(
+        default=0, metadata={"help": "pyramid level of the outline refinement (0 = full size)"}
+    )
     renderer: str = field(
         default="cpu-raster", metadata={"help": "silhouette renderer plugin (mocap plugins)"}
     )
@@ -412,11 +419,19 @@ class SilhouetteTracker:
         if wide:
             half[:] = np.deg2rad(cfg.max_range_deg)
         # Grid over abduction, flexion and the hinge; the axial twist is left to the simplex.
-        offsets = np.linspace(-1, 1, cfg.grid) if cfg.grid > 1 else np.zeros(1)
         grid_axes = [0, 1, 3]
-        mesh = np.stack(np.meshgrid(*[offsets] * 3, indexing="ij"), -1).reshape(-1, 3)
-        samples = np.repeat(x[params][None], len(mesh), axis=0)
-        samples[:, grid_axes] += mesh * half[grid_axes]
+        if wide:
+            # At initialisation nothing bounds the limb yet: the whole range of each angle.
+            axes = [np.linspace(LOWER_LIMITS[params[a]], UPPER_LIMITS[params[a]], cfg.init_grid)
+                    for a in grid_axes]  # fmt: skip
+            mesh = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+            samples = np.repeat(x[params][None], len(mesh), axis=0)
+            samples[:, grid_axes] = mesh
+        else:
+            offsets = np.linspace(-1, 1, cfg.grid) if cfg.grid > 1 else np.zeros(1)
+            mesh = np.stack(np.meshgrid(*[offsets] * 3, indexing="ij"), -1).reshape(-1, 3)
+            samples = np.repeat(x[params][None], len(mesh), axis=0)
+            samples[:, grid_axes] += mesh * half[grid_axes]
         samples = np.clip(samples, LOWER_LIMITS[params], UPPER_LIMITS[params])
         best, best_e = x[params], stage(x[params])
         for values in samples:
@@ -496,7 +511,7 @@ class SilhouetteTracker:
             # The outlines first: from a close start they reach the optimum on their own; the
             # hierarchy's grids then look for larger motions, and the better of the two wins
             # (the coarse levels of the hierarchy can leave a fine optimum).
-            x = self._contour(energy, x, cfg.final_level)
+            x = self._contour(energy, x, cfg.contour_level)
             start = x.copy()
         for level in sorted({coarse, cfg.search_level}, reverse=True):
             x = self._stage(energy, x, _ROOT, root_steps, level, evals)
@@ -506,7 +521,7 @@ class SilhouetteTracker:
             x = self._limb(energy, x, limb, change, cfg.search_level, wide=init)
         x = self._stage(energy, x, _ROOT, root_steps / 2, cfg.final_level, evals)
         if start is not None:
-            x = self._contour(energy, x, cfg.final_level)
+            x = self._contour(energy, x, cfg.contour_level)
             if self._objective(energy, start, cfg.final_level) < self._objective(
                     energy, x, cfg.final_level):
                 x = start

@@ -85,7 +85,7 @@ def test_cli_synth_then_track_writes_every_output(tmp_path):
     ws = tmp_path / "walk"
     made = run_cli("synth", ws, "--bvh", clip, "--frames", "3", "--size", "320x240", "--clean")
     assert made.returncode == 0, made.stderr
-    result = run_cli("track", ws, "--simplex-evals", "25", "--init-rounds", "2")
+    result = run_cli("track", ws)
     assert result.returncode == 0, result.stderr
     with (ws / "tracks" / "joints.csv").open() as handle:
         rows = list(csv.DictReader(handle))
@@ -95,9 +95,9 @@ def test_cli_synth_then_track_writes_every_output(tmp_path):
                  for r in csv.DictReader(handle)}  # fmt: skip
     errors = [np.linalg.norm(np.array([float(r[k]) for k in "xyz"]) - truth[r["frame"], r["joint"]])
               for r in rows]  # fmt: skip
-    # Automatic start at 320x240 with a reduced budget: measured 64 mm; a flipped or lost body
-    # is 300 mm and more.
-    assert np.mean(errors) < 0.08
+    # Automatic start (visual hull, limb hypotheses, shape from the outlines of the 3 frames)
+    # at 320x240: measured 18 mm; swapped legs are ~100 mm, a flipped or lost body 300 mm.
+    assert np.mean(errors) < 0.04
     pose = json.loads((ws / "tracks" / "pose.json").read_text())
     assert [f["frame"] for f in pose["frames"]] == [0, 1, 2]
     assert all(len(f["params"]) == 24 for f in pose["frames"])
@@ -109,7 +109,7 @@ def test_cli_synth_then_track_writes_every_output(tmp_path):
     assert any("/xor@SegmentationImage" in e for e in entities)
     assert any(e.startswith("/world/body/skeleton@Points3D:keypoint_ids") for e in entities)
     assert any(e.startswith("/world/body/mesh@Mesh3D") for e in entities)
-    again = run_cli("track", ws, "--simplex-evals", "25", "--init-rounds", "2")
+    again = run_cli("track", ws)
     assert again.returncode == 0 and "up to date" in again.stdout
     # The tracked sequence is what the motion report reads; 3 frames are too few to filter,
     # which it says in one line (the full report is tested in test_report.py).
