@@ -257,6 +257,7 @@ class SilhouetteTracker:
         self.shape = shape
         self.model = BodyModel(shape) if shape is not None else None
         self.history: list[np.ndarray] = []  # params of the last tracked frames
+        self._xor_floor = np.inf  # XOR fraction of the best initialisation (divergence test)
         self.evaluations = 0
 
     # -- initialisation -------------------------------------------------------------------
@@ -573,7 +574,9 @@ class SilhouetteTracker:
             if event:
                 # What the silhouettes allow: real masks have holes and ghosts, so the first
                 # frame's XOR sets the bar (at least `max_xor_fraction`) for the divergence test.
-                self._xor_floor = e / area
+                # The lowest such bar so far: a re-initialisation that starts worse must not
+                # raise it, or a drifting track would never count as diverged again.
+                self._xor_floor = min(self._xor_floor, e / area)
             limit = max(self.config.max_xor_fraction, 1.5 * self._xor_floor) * area
             if e > limit and event == "":
                 # Divergence: start again from the visual hull.
