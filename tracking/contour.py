@@ -235,6 +235,27 @@ def _damped_steps(a: np.ndarray, b: np.ndarray, lam: float) -> np.ndarray | None
         return None
 
 
+def _accepted_step(a: np.ndarray, b: np.ndarray, z: np.ndarray, bounds: tuple[np.ndarray,
+                   np.ndarray], lam: float, best: float, cost: Callable[[np.ndarray], float],
+                   ) -> tuple[np.ndarray | None, float, float, int]:  # fmt: skip
+    """Up to three damped steps from z within bounds, the damping raised tenfold after each
+    rejected one: (the first whose cost is below `best`, or None; its cost; the damping for
+    the next iteration; the number of cost evaluations)."""
+    evaluations = 0
+    for _attempt in range(3):
+        step = _damped_steps(a, b, lam)
+        if step is None:
+            lam *= 10
+            continue
+        y = np.clip(z + step, *bounds)
+        e = cost(y)
+        evaluations += 1
+        if e < best:
+            return y, e, max(lam / 3, 1e-4), evaluations
+        lam *= 10
+    return None, best, lam, evaluations
+
+
 class _FrameOutlines:
     """One frame's image outlines at one pyramid level."""
 
@@ -280,6 +301,12 @@ class ContourRefiner:
         best = energy(x)
         evaluations = 1
         lam = 1e-2
+
+        def cost(values: np.ndarray) -> float:
+            y = x.copy()
+            y[free] = values
+            return energy(y)
+
         for _ in range(self.config.iterations):
             a, b = self.frame.system(self.model, self.normals_in_node, x, free, self.renderer,
                                      self.config)  # fmt: skip
@@ -287,24 +314,13 @@ class ContourRefiner:
                 centre, weight = prior
                 a = a + np.diag(weight[free])
                 b = b + weight[free] * (x[free] - centre[free])
-            improved = False
-            for _attempt in range(3):
-                step = _damped_steps(a, b, lam)
-                if step is None:
-                    lam *= 10
-                    continue
-                y = x.copy()
-                y[free] += step
-                y = np.clip(y, LOWER_LIMITS, UPPER_LIMITS)
-                e = energy(y)
-                evaluations += 1
-                if e < best:
-                    x, best, improved = y, e, True
-                    lam = max(lam / 3, 1e-4)
-                    break
-                lam *= 10
-            if not improved:
+            values, best, lam, n = _accepted_step(a, b, x[free], (LOWER_LIMITS[free],
+                                                  UPPER_LIMITS[free]), lam, best, cost)  # fmt: skip
+            evaluations += n
+            if values is None:
                 break
+            x = x.copy()
+            x[free] = values
         return x, best, evaluations
 
 
@@ -328,6 +344,12 @@ def refine_shape(base: BodyShape, scales: np.ndarray, frames: Sequence[tuple[Seq
     free = np.arange(n_pose)
     lo = np.concatenate([np.full(n_shape, bounds[0]), np.tile(LOWER_LIMITS, len(poses))])
     hi = np.concatenate([np.full(n_shape, bounds[1]), np.tile(UPPER_LIMITS, len(poses))])
+
+    def split(z: np.ndarray) -> tuple[BodyModel, list[np.ndarray]]:
+        """The model of z's shape scales and z's poses."""
+        return (BodyModel(scaled_shape(base, z[:n_shape])),
+                [z[n_shape + k * n_pose:n_shape + (k + 1) * n_pose] for k in range(len(poses))])
+
     model = BodyModel(scaled_shape(base, scales))
     best = energy(model, poses)
     lam, h = 1e-2, 1e-3
@@ -344,24 +366,11 @@ def refine_shape(base: BodyShape, scales: np.ndarray, frames: Sequence[tuple[Seq
             rows = np.r_[np.arange(n_shape), n_shape + k * n_pose + free]
             a[np.ix_(rows, rows)] += ak
             b[rows] += bk
-        z = np.concatenate([scales, *poses])
-        improved = False
-        for _attempt in range(3):
-            step = _damped_steps(a, b, lam)
-            if step is None:
-                lam *= 10
-                continue
-            y = np.clip(z + step, lo, hi)
-            trial = BodyModel(scaled_shape(base, y[:n_shape]))
-            trial_poses = [y[n_shape + k * n_pose:n_shape + (k + 1) * n_pose]
-                           for k in range(len(poses))]  # fmt: skip
-            e = energy(trial, trial_poses)
-            if e < best:
-                scales, poses, model, best, improved = (y[:n_shape], trial_poses, trial, e,
-                                                        True)  # fmt: skip
-                lam = max(lam / 3, 1e-4)
-                break
-            lam *= 10
-        if not improved:
+        accepted, best, lam, _ = _accepted_step(a, b, np.concatenate([scales, *poses]),
+                                                (lo, hi), lam, best,
+                                                lambda z: energy(*split(z)))  # fmt: skip
+        if accepted is None:
             break
+        model, poses = split(accepted)
+        scales = accepted[:n_shape]
     return scales, poses, best
