@@ -4,6 +4,7 @@ demo for plausibility."""
 from __future__ import annotations
 
 import hashlib
+import warnings
 from pathlib import Path
 
 import cv2
@@ -18,6 +19,7 @@ from tracking.cameras import read_cameras
 from tracking.silhouette import BackgroundModel
 from tracking.silhouettes_step import (
     SilhouettesConfig,
+    _free_median,
     frame_chunks,
     make_silhouettes,
     median_background,
@@ -74,6 +76,24 @@ def test_second_background_pass_leaves_out_the_subject():
     np.testing.assert_allclose(np.median(two.mean[spot]), 100, atol=1.5)
     # Where nothing passed, the second pass changes nothing of note.
     np.testing.assert_allclose(two.std[clear], one.std[clear], rtol=0.35, atol=0.5)
+
+
+def test_free_median_is_the_median_over_the_free_frames():
+    rng = np.random.default_rng(8)
+    frames = [rng.integers(0, 256, (7, 9, 3), dtype=np.uint8) for _ in range(9)]
+    free = rng.random((9, 7, 9)) < 0.6
+    previous = median_background(frames, passes=1)
+    got = _free_median(frames, free, previous)
+    stack = np.stack(frames).astype(float)
+    stack[~free] = np.nan
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        median = np.nanmedian(stack, axis=0)
+        mad = np.nanmedian(np.abs(stack - median[None]), axis=0)
+    enough = free.sum(axis=0) >= 9 // 4
+    np.testing.assert_allclose(got.mean[enough], median[enough])
+    np.testing.assert_allclose(got.std[enough], 1.4826 * mad[enough], rtol=1e-5)
+    np.testing.assert_array_equal(got.mean[~enough], previous.mean[~enough])
 
 
 def test_silhouettes_of_a_moving_blob_match_the_truth(blob_workspace):
