@@ -3,6 +3,8 @@ silhouettes best overlap the image silhouettes (the XOR energy of `tracking.ener
 
 Per frame, starting from a constant-velocity prediction of the previous two frames:
 
+0. all 24 parameters together against the silhouette outlines (`tracking.contour`, damped
+   Gauss-Newton, a step kept only when the XOR energy drops);
 1. root: the 6 global parameters by downhill simplex (Nelder-Mead), coarse pyramid level first;
 2. "head and hip": the spine and neck bends, by simplex;
 3. each limb's 4 parameters (ball joint + hinge): a regular grid over the two swing angles and
@@ -12,19 +14,26 @@ Per frame, starting from a constant-velocity prediction of the previous two fram
    the torso axis); the best sample is refined by simplex;
 4. a final simplex over the root at the finest level. (The thesis' last step, hands and feet,
    has no parameters in our 24-parameter model: wrists and ankles are rigid end sites.)
+5. step 0 again; the better of steps 0 and 5 by XOR is the frame's pose.
 
-A stage only moves part of the body, so the silhouette of the rest is rendered once per stage
-and each energy evaluation renders only the moving triangles (`_StageEnergy`).
+Steps 1-4 alone drift along directions the silhouettes hardly tell apart (pelvis pitch against
+hip flexion and spine bend), and their coarse levels can leave a fine optimum: steps 0 and 5
+remove both. A stage only moves part of the body, so the silhouette of the rest is rendered
+once per stage and each energy evaluation renders only the moving triangles (`_StageEnergy`).
 
 Initialisation (frame 0, and after a lost frame): automatic from the silhouettes. The visual
-hull is carved on a voxel grid around the point where the views' silhouette centroids meet,
-its surface fitted by `tracking.fit.fit_body` (scale and pose), then refined against the
-silhouettes. A pose given by the user replaces this ("model alignment", thesis 6.2.4).
+hull is carved on a voxel grid around the point where the views' silhouette centroids meet and
+its surface fitted by `tracking.fit.fit_body` (scale and pose). A hull cannot tell left from
+right limbs: the fit and its left/right swaps of legs and arms (`swap_sides`) are each refined
+against the outlines and the lowest XOR wins; the limbs' grids then cover their whole range.
+When the shape is unknown, the segment lengths come from the outlines too, and
+`calibrate_shape` refines them over several frames of a first pass. A pose given by the user
+replaces this ("model alignment", thesis 6.2.4).
 
 A frame whose energy stays above `max_xor_fraction` of the silhouette area (or 1.5 times the
-XOR of the initial frame, when real silhouettes with holes and ghosts set a higher floor) is a
-divergence: it is logged, the tracker re-initialises from the visual hull, and if that fails
-too the frame is reported lost (no joints; never NaN).
+lowest XOR of an initialisation, when real silhouettes with holes and ghosts set a higher
+floor) is a divergence: it is logged, the tracker re-initialises from the visual hull, and if
+that fails too the frame is reported lost (no joints; never NaN).
 """
 
 from __future__ import annotations
