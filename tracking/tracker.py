@@ -353,7 +353,7 @@ class SilhouetteTracker:
         from tracking.contour import ContourConfig, refine_shape
 
         assert self.shape is not None
-        level = self.config.search_level
+        level = self.config.contour_level
         base = self.shape
         energies = [self._energy(masks) for masks in sequence]
 
