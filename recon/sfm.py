@@ -243,7 +243,7 @@ def extract_features(
             num_cameras = database.num_cameras()
         if num_images != len(names):
             raise UserError(f"COLMAP read {num_images} of {len(names)} images in {ws.images_dir}")
-    _record(recordings, _log_features, ws, ws.database_path)
+    _record(recordings, _log_features, ws, _feature_rows(ws.database_path))
     return ws.record_step(
         "features",
         fp,
@@ -330,29 +330,38 @@ def _sequential_pairs(names: list[str], overlap: int) -> list[tuple[str, str]]:
             for j in range(i + 1, min(len(names), i + 1 + overlap))]
 
 
-def _log_features(ws: Workspace, database_path: Path) -> None:
-    from recon import recording
-
-    with pycolmap.Database.open(database_path) as db, recording.step_recording(
-        ws.log_path("features"), "features"
-    ) as rec:
+def _feature_rows(database_path: Path) -> list[tuple[str, np.ndarray, int, int, np.ndarray]]:
+    """(image name, K, width, height, keypoints (N, 2)) of every image, sorted by name: what
+    the features recording shows, read here so that the deferred recording job never opens
+    the database while mapping writes it (SQLite would refuse one of them under load)."""
+    with pycolmap.Database.open(database_path) as db:
         cameras = {c.camera_id: c for c in db.read_all_cameras()}
-        counts = []
+        rows = []
         for image in sorted(db.read_all_images(), key=lambda im: im.name):
             cam = cameras[image.camera_id]
-            keypoints = db.read_keypoints(image.image_id)
-            counts.append(len(keypoints))
+            rows.append((image.name, cam.calibration_matrix(), cam.width, cam.height,
+                         db.read_keypoints(image.image_id)[:, :2].copy()))  # fmt: skip
+    return rows
+
+
+def _log_features(ws: Workspace, rows: list[tuple[str, np.ndarray, int, int, np.ndarray]]
+                  ) -> None:  # fmt: skip
+    from recon import recording
+
+    with recording.step_recording(ws.log_path("features"), "features") as rec:
+        for name, K, width, height, keypoints in rows:
             recording.log_camera_image(
                 rec,
-                image_name=image.name,
-                image_path=ws.images_dir / image.name,
-                K=cam.calibration_matrix(),
-                width=cam.width,
-                height=cam.height,
+                image_name=name,
+                image_path=ws.images_dir / name,
+                K=K,
+                width=width,
+                height=height,
                 # COLMAP keypoints have pixel centres at +0.5; Rerun's 2D space too.
-                points2D=keypoints[:, :2],
+                points2D=keypoints,
             )
-        recording.log_series(rec, "image", "stats/keypoints_per_image", counts)
+        recording.log_series(rec, "image", "stats/keypoints_per_image",
+                             [len(row[4]) for row in rows])
 
 
 # Matches -------------------------------------------------------------------------------------
