@@ -290,9 +290,9 @@ def _cmd_track(args: argparse.Namespace) -> None:
     from tracking.track_step import TrackStepConfig, track_workspace
     from tracking.tracker import TrackConfig
 
+    step, config = config_from_args(TrackStepConfig, args), config_from_args(TrackConfig, args)
     ws = Workspace.open_video(args.workspace)
-    summary = track_workspace(ws, config_from_args(TrackStepConfig, args),
-                              config_from_args(TrackConfig, args), overwrite=args.overwrite)
+    summary = track_workspace(ws, step, config, overwrite=args.overwrite)
     note = " (up to date)" if summary.get("up_to_date") else ""
     print(f"track      {summary['tracked']}/{summary['frames']} frames tracked{note}; median "
           f"XOR {summary['median_xor_fraction']:.1%} of the silhouette; "

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -602,6 +603,24 @@ class BodyModel:
         rest = self.posed_vertices(Pose.neutral())
         rest.flags.writeable = False
         object.__setattr__(self, "rest_vertices", rest)
+
+    @cached_property
+    def vertex_normals_in_node(self) -> np.ndarray:
+        """(V, 3) unit outward normals of the vertices in their node's frame (read-only)."""
+        v, f = self.vertex_in_node, self.faces
+        face_n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+        normals = np.zeros_like(v)
+        for k in range(3):
+            np.add.at(normals, f[:, k], face_n)
+        normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+        # Outwards: away from the vertex's segment centre (superquadrics are star-shaped).
+        centre = np.zeros_like(v)
+        for seg in np.unique(self.segment_of_vertex):
+            on = self.segment_of_vertex == seg
+            centre[on] = v[on].mean(axis=0)
+        normals[np.sum(normals * (v - centre), axis=1) < 0] *= -1
+        normals.flags.writeable = False
+        return normals
 
     @property
     def segment_names(self) -> tuple[str, ...]:

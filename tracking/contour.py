@@ -109,24 +109,6 @@ class _ViewTarget:
         return bilinear(self.sdf), np.stack([bilinear(self.grad_u), bilinear(self.grad_v)], 1)
 
 
-def _vertex_normals_in_node(model: BodyModel) -> np.ndarray:
-    """(V, 3) unit outward normals of the model's vertices in their node's frame."""
-    v, f = model.vertex_in_node, model.faces
-    face_n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    normals = np.zeros_like(v)
-    for k in range(3):
-        np.add.at(normals, f[:, k], face_n)
-    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
-    # Orient outwards: away from the vertex's segment centre (superquadrics are star-shaped).
-    centre = np.zeros_like(v)
-    for seg in np.unique(model.segment_of_vertex):
-        on = model.segment_of_vertex == seg
-        centre[on] = v[on].mean(axis=0)
-    flip = np.sum(normals * (v - centre), axis=1) < 0
-    normals[flip] *= -1
-    return normals
-
-
 def _projection_derivative(camera: Camera, points: np.ndarray) -> np.ndarray:
     """(N, 2, 3) derivative of the pixel position with respect to the world point (the
     pinhole part of the projection: distortion changes it by far less than the step)."""
@@ -145,13 +127,13 @@ class _Posed:
     """A model in a pose: world vertices and normals, and the derivatives of the vertices with
     respect to the pose parameters `free` (and to any `extra` columns, e.g. shape scales)."""
 
-    def __init__(self, model: BodyModel, normals_in_node: np.ndarray, x: np.ndarray,
-                 free: np.ndarray, extra: np.ndarray | None = None) -> None:  # fmt: skip
+    def __init__(self, model: BodyModel, x: np.ndarray, free: np.ndarray,
+                 extra: np.ndarray | None = None) -> None:  # fmt: skip
         node = model.node_of_segment[model.segment_of_vertex]
         world, self.axes, self.pivots = pose_derivative_axes(Pose(x), model.shape)
         rot = world[node, :3, :3]
         self.verts = np.einsum("vij,vj->vi", rot, model.vertex_in_node) + world[node, :3, 3]
-        self.normals = np.einsum("vij,vj->vi", rot, normals_in_node)
+        self.normals = np.einsum("vij,vj->vi", rot, model.vertex_normals_in_node)
         self.moves = PARAM_MOVES_NODE[free][:, node]  # (P, V)
         self.free = free
         self.extra = extra  # (V, 3, E) or None
@@ -265,12 +247,12 @@ class _FrameOutlines:
         self.targets = [_ViewTarget(c, m, config) for c, m in
                         zip(self.cameras, masks, strict=True)]  # fmt: skip
 
-    def system(self, model: BodyModel, normals_in_node: np.ndarray, x: np.ndarray,
-               free: np.ndarray, renderer: object, config: ContourConfig,
+    def system(self, model: BodyModel, x: np.ndarray, free: np.ndarray, renderer: object,
+               config: ContourConfig,
                extra: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
         from tracking.render import render_views
 
-        posed = _Posed(model, normals_in_node, x, free, extra)
+        posed = _Posed(model, x, free, extra)
         masks = render_views(renderer, posed.verts, model.faces, self.cameras)
         return _outline_system(posed, self.cameras, self.targets, masks, config)
 
@@ -284,7 +266,6 @@ class ContourRefiner:
         self.model, self.renderer = model, renderer
         self.config = config or ContourConfig()
         self.frame = _FrameOutlines(cameras, masks, self.config)
-        self.normals_in_node = _vertex_normals_in_node(model)
 
     def refine(self, x: np.ndarray, free: Sequence[int], energy: Callable[[np.ndarray], float],
                prior: tuple[np.ndarray, np.ndarray] | None = None,
@@ -308,8 +289,7 @@ class ContourRefiner:
             return energy(y)
 
         for _ in range(self.config.iterations):
-            a, b = self.frame.system(self.model, self.normals_in_node, x, free, self.renderer,
-                                     self.config)  # fmt: skip
+            a, b = self.frame.system(self.model, x, free, self.renderer, self.config)
             if prior is not None:
                 centre, weight = prior
                 a = a + np.diag(weight[free])
@@ -355,14 +335,13 @@ def refine_shape(base: BodyShape, scales: np.ndarray, frames: Sequence[tuple[Seq
     lam, h = 1e-2, 1e-3
     size = n_shape + n_pose * len(poses)
     for _ in range(cfg.iterations):
-        normals = _vertex_normals_in_node(model)
         bumped = [BodyModel(scaled_shape(base, scales + h * np.eye(n_shape)[i]))
                   for i in range(n_shape)]  # fmt: skip
         a, b = np.zeros((size, size)), np.zeros(size)
         for k, (frame, x) in enumerate(zip(outlines, poses, strict=True)):
             verts = model.posed_vertices(Pose(x))
             extra = np.stack([(m.posed_vertices(Pose(x)) - verts) / h for m in bumped], -1)
-            ak, bk = frame.system(model, normals, x, free, renderer, cfg, extra)
+            ak, bk = frame.system(model, x, free, renderer, cfg, extra)
             rows = np.r_[np.arange(n_shape), n_shape + k * n_pose + free]
             a[np.ix_(rows, rows)] += ak
             b[rows] += bk

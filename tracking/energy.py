@@ -24,6 +24,7 @@ centre.
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 from typing import Any
 
@@ -96,6 +97,12 @@ class SilhouetteEnergy:
             self._pixel_area.append(np.array([
                 (c0.width * c0.height) / (c.width * c.height)
                 for c0, c in zip(cameras, level_cameras, strict=True)]))
+
+    def with_model(self, model: BodyModel) -> SilhouetteEnergy:
+        """The same cameras and mask pyramid (shared, not rebuilt) for another body model."""
+        other = copy.copy(self)
+        other.model, other.evaluations = model, 0
+        return other
 
     def _check_level(self, level: int) -> None:
         if not 0 <= level < self.levels:

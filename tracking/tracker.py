@@ -60,6 +60,7 @@ from tracking.body import (
     scaled_shape,
 )
 from tracking.cameras import Camera
+from tracking.contour import ContourConfig, ContourRefiner, refine_shape
 from tracking.energy import SilhouetteEnergy
 from tracking.render import render_views
 
@@ -159,7 +160,8 @@ class TrackConfig:
     contour_iterations: int = field(
         default=8,
         metadata={"help": "iterations of the joint refinement of all parameters against the "
-                  "silhouette outlines after the hierarchy (tracking.contour; 0 = off)"},
+                  "silhouette outlines before and after the hierarchy (tracking.contour; "
+                  "0 = off)"},
     )  # fmt: skip
     contour_level: int = field(
         default=0, metadata={"help": "pyramid level of the outline refinement (0 = full size)"}
@@ -167,6 +169,37 @@ class TrackConfig:
     renderer: str = field(
         default="cpu-raster", metadata={"help": "silhouette renderer plugin (mocap plugins)"}
     )
+
+    def __post_init__(self) -> None:
+        from recon.errors import UserError
+
+        def flag(name: str) -> str:
+            return "--" + name.replace("_", "-")
+
+        if self.levels < 1:
+            raise UserError(f"--levels must be >= 1, got {self.levels}")
+        for name in ("search_level", "final_level", "contour_level"):
+            if not 0 <= getattr(self, name) < self.levels:
+                raise UserError(f"{flag(name)} must be in 0..{self.levels - 1} (--levels "
+                                f"{self.levels}), got {getattr(self, name)}")
+        for name, low in (("grid", 1), ("init_grid", 1), ("simplex_evals", 1),
+                          ("init_simplex_evals", 1), ("passes", 1), ("shape_stride", 1),
+                          ("shape_frames", 0), ("contour_iterations", 0)):  # fmt: skip
+            if getattr(self, name) < low:
+                raise UserError(f"{flag(name)} must be >= {low}, got {getattr(self, name)}")
+        for name in ("prior_weight", "twist_weight", "range_gain"):
+            if getattr(self, name) < 0:
+                raise UserError(f"{flag(name)} must be >= 0, got {getattr(self, name)}")
+        for name in ("prior_scale_deg", "prior_scale_m", "twist_scale_deg", "max_xor_fraction",
+                     "voxel_m"):  # fmt: skip
+            if not getattr(self, name) > 0:
+                raise UserError(f"{flag(name)} must be > 0, got {getattr(self, name)}")
+        if not 0 <= self.min_range_deg <= self.max_range_deg:
+            raise UserError(f"need 0 <= --min-range-deg <= --max-range-deg, got "
+                            f"{self.min_range_deg} and {self.max_range_deg}")
+        if self.hull_size_m <= 2 * self.voxel_m:
+            raise UserError(f"--hull-size-m {self.hull_size_m} must exceed two voxels "
+                            f"(--voxel-m {self.voxel_m})")
 
 
 @dataclass(frozen=True)
@@ -267,6 +300,8 @@ class SilhouetteTracker:
         self.model = BodyModel(shape) if shape is not None else None
         self.history: list[np.ndarray] = []  # params of the last tracked frames
         self._xor_floor = np.inf  # XOR fraction of the best initialisation (divergence test)
+        # (the frame's energy, level, its outline refiner): built once per frame and level
+        self._refiner: tuple[SilhouetteEnergy, int, ContourRefiner] | None = None
         self.evaluations = 0
 
     # -- initialisation -------------------------------------------------------------------
@@ -329,8 +364,6 @@ class SilhouetteTracker:
         """The visual hull cannot tell which leg (or arm) is which: of the pose and its
         left/right swaps of the legs, the arms, and both, the one whose outline refinement
         ends with the lowest XOR energy."""
-        from tracking.contour import ContourConfig, ContourRefiner
-
         level = self.config.search_level
         energy = self._energy(masks)
         refiner = ContourRefiner(energy.model, energy.cameras[level], energy.masks[level],
@@ -350,8 +383,6 @@ class SilhouetteTracker:
         """Segment-length scales (`SHAPE_GROUPS`) and the poses of one or more frames
         together, by Gauss-Newton on the silhouette outlines (`tracking.contour.refine_shape`);
         sets the shape and returns the poses."""
-        from tracking.contour import ContourConfig, refine_shape
-
         assert self.shape is not None
         level = self.config.contour_level
         base = self.shape
@@ -359,9 +390,8 @@ class SilhouetteTracker:
 
         def energy(model: BodyModel, xs: Sequence[np.ndarray]) -> float:
             self.evaluations += len(xs)
-            return sum(SilhouetteEnergy(model, self.cameras, masks, self.renderer,
-                                        levels=level + 1)(Pose(x), level)
-                       for masks, x in zip(sequence, xs, strict=True))  # fmt: skip
+            return sum(e.with_model(model)(Pose(x), level)
+                       for e, x in zip(energies, xs, strict=True))  # fmt: skip
 
         scales, xs, _ = refine_shape(
             base, np.ones(len(SHAPE_GROUPS)),
@@ -545,11 +575,13 @@ class SilhouetteTracker:
     def _contour(self, energy: SilhouetteEnergy, x: np.ndarray, level: int) -> np.ndarray:
         """All parameters at once against the silhouette outlines (`tracking.contour`), steps
         accepted only when the XOR energy plus the temporal prior goes down."""
-        from tracking.contour import ContourConfig, ContourRefiner
-
-        refiner = ContourRefiner(energy.model, energy.cameras[level], energy.masks[level],
-                                 energy.renderer,
-                                 ContourConfig(iterations=self.config.contour_iterations))
+        # One refiner per frame and level: its image outlines and distance fields are the
+        # frame's, whichever pose it refines (twice a frame: before and after the hierarchy).
+        if self._refiner is None or self._refiner[0] is not energy or self._refiner[1] != level:
+            self._refiner = (energy, level, ContourRefiner(
+                energy.model, energy.cameras[level], energy.masks[level], energy.renderer,
+                ContourConfig(iterations=self.config.contour_iterations)))
+        refiner = self._refiner[2]
         x, _, evaluations = refiner.refine(x, np.arange(N_POSE_PARAMS),
                                            lambda y: self._objective(energy, y, level))
         self.evaluations += evaluations

@@ -121,3 +121,11 @@ def test_cli_synth_then_track_writes_every_output(tmp_path):
 def test_cli_track_needs_a_video_workspace(tmp_path):
     result = run_cli("track", tmp_path)
     assert result.returncode == 2 and "not a video workspace" in result.stderr
+
+
+@pytest.mark.parametrize("flag", [["--contour-level", "3"], ["--shape-stride", "0"],
+                                  ["--levels", "0"], ["--max-xor-fraction", "0"]])
+def test_cli_track_rejects_bad_settings_in_one_line(tmp_path, flag):
+    result = run_cli("track", tmp_path, *flag)
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert result.stderr.strip().count("\n") == 0 and flag[0] in result.stderr
