@@ -2,8 +2,9 @@
 
     .venv/bin/python benchmarks/tracking_pose2sim.py [--keep DIR] [--last N]
 
-`mocap init-video` (Calib.qca.txt), `mocap silhouettes` (temporal-median background: the demo
-has no empty frame) and `mocap track` with their defaults, then the silhouette IoU between the
+`mocap init-video` (Calib.qca.txt), `mocap silhouettes` (the demo has no empty frame: temporal
+median background, completed by the extrinsic calibration shots, which show the lab without the
+subject, where the subject moved; the multi-view check) and `mocap track` with their defaults, then the silhouette IoU between the
 tracked model and the image silhouettes, per camera per frame, and a picture of the overlay
 (model red, image blue, both grey) for a few frames: benchmarks/out/tracking_pose2sim.png.
 
@@ -44,7 +45,8 @@ def main() -> None:
         if not (ws / "cameras.json").exists():
             mocap("init-video", str(ws), "--videos", str(DEMO / "videos"), "--calibration",
                    str(DEMO / "calibration" / "Calib.qca.txt"))  # fmt: skip
-        t_sil = mocap("silhouettes", str(ws))
+        t_sil = mocap("silhouettes", str(ws), "--background-images",
+                      str(DEMO / "calibration" / "extrinsics"))
         extra = ["--last", str(args.last)] if args.last is not None else []
         t_track = mocap("track", str(ws), *extra)
         pose_file = json.loads((ws / "tracks" / "pose.json").read_text())

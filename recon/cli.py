@@ -6,6 +6,7 @@ import argparse
 import shlex
 import sys
 from pathlib import Path
+from typing import Any
 
 from recon.configs import add_config_arguments, config_from_args
 from recon.errors import UserError
@@ -114,14 +115,8 @@ def _cmd_batch(args: argparse.Namespace) -> None:
     from recon.batch import BatchConfig, parse_steps, run_batch
     from recon.mvs import DenseConfig, MeshConfig
     from recon.sfm import SfMConfig
-    from tracking.silhouette import SilhouetteConfig
-    from tracking.silhouettes_step import SilhouettesConfig
     from tracking.tracker import TrackConfig
 
-    try:
-        thresholds = config_from_args(SilhouetteConfig, args)
-    except ValueError as exc:
-        raise UserError(str(exc)) from None
     report = run_batch(
         args.workspaces,
         config_from_args(BatchConfig, args, steps=parse_steps(args.batch_steps)),
@@ -130,7 +125,7 @@ def _cmd_batch(args: argparse.Namespace) -> None:
         config_from_args(MeshConfig, args),
         overwrite=args.overwrite,
         echo=print,
-        silhouettes=config_from_args(SilhouettesConfig, args, thresholds=thresholds),
+        silhouettes=_silhouettes_config(args),
         track=config_from_args(TrackConfig, args),
     )
     print("\n".join(report.lines()))
@@ -261,16 +256,26 @@ def _cmd_init_video(args: argparse.Namespace) -> None:
         print(f"note: {note}", file=sys.stderr)
 
 
-def _cmd_silhouettes(args: argparse.Namespace) -> None:
-    from recon.workspace import Workspace
+def _silhouettes_config(args: argparse.Namespace) -> Any:
+    """`SilhouettesConfig` from the flags of `mocap silhouettes` (and `mocap batch`), with its
+    nested threshold and multi-view check settings."""
+    from tracking.hull import HullCheckConfig
     from tracking.silhouette import SilhouetteConfig
-    from tracking.silhouettes_step import SilhouettesConfig, make_silhouettes, summary_lines
+    from tracking.silhouettes_step import SilhouettesConfig
 
     try:
         thresholds = config_from_args(SilhouetteConfig, args)
     except ValueError as exc:
         raise UserError(str(exc)) from None
-    config = config_from_args(SilhouettesConfig, args, thresholds=thresholds)
+    return config_from_args(SilhouettesConfig, args, thresholds=thresholds,
+                            hull=config_from_args(HullCheckConfig, args))
+
+
+def _cmd_silhouettes(args: argparse.Namespace) -> None:
+    from recon.workspace import Workspace
+    from tracking.silhouettes_step import make_silhouettes, summary_lines
+
+    config = _silhouettes_config(args)
     ws = Workspace.open_video(args.workspace)
     print("\n".join(summary_lines(ws, make_silhouettes(ws, config, overwrite=args.overwrite))))
 
@@ -344,6 +349,7 @@ def build_parser() -> argparse.ArgumentParser:
     from tracking.export import BodyExportConfig
     from tracking.fit import FitConfig
     from tracking.fit_cloud import SubjectConfig
+    from tracking.hull import HullCheckConfig
     from tracking.report import ReportConfig
     from tracking.silhouette import SilhouetteConfig
     from tracking.silhouettes_step import SilhouettesConfig
@@ -461,8 +467,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_config_arguments(p, DenseConfig)
     add_config_arguments(p, MeshConfig)
     # Video workspaces: the settings of `mocap silhouettes` and `mocap track`.
-    add_config_arguments(p, SilhouettesConfig, exclude=("thresholds",))
+    add_config_arguments(p, SilhouettesConfig, exclude=("thresholds", "hull"))
     add_config_arguments(p, SilhouetteConfig)
+    add_config_arguments(p, HullCheckConfig)
     add_config_arguments(p, TrackConfig)
     p.set_defaults(func=_cmd_batch)
 
@@ -609,8 +616,9 @@ def build_parser() -> argparse.ArgumentParser:
         "WS/silhouettes/<camera>/<frame:06d>.png (0/255) and WS/logs/silhouettes.rrd; frames "
         "whose silhouette is empty or touches the image border are reported.",
     )
-    add_config_arguments(p, SilhouettesConfig, exclude=("thresholds",))
+    add_config_arguments(p, SilhouettesConfig, exclude=("thresholds", "hull"))
     add_config_arguments(p, SilhouetteConfig)
+    add_config_arguments(p, HullCheckConfig)
     p.set_defaults(func=_cmd_silhouettes)
 
     p = sub.add_parser("view", help="open the workspace's recordings in the Rerun viewer")

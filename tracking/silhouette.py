@@ -367,13 +367,13 @@ def foreground_mask(labels: np.ndarray, config: SilhouetteConfig | None = None) 
     if close_px > 1:
         mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, _disc(close_px))
     if config.max_hole_area > 0:
-        mask = _fill_holes(mask, round(config.max_hole_area * k * k))
+        mask = fill_holes(mask, round(config.max_hole_area * k * k))
     if config.min_area > 0:
         mask = _drop_small(mask, round(config.min_area * k * k))
     return mask.astype(bool)
 
 
-def _fill_holes(mask: np.ndarray, max_area: int) -> np.ndarray:
+def fill_holes(mask: np.ndarray, max_area: int) -> np.ndarray:
     """Background components not touching the border and at most max_area pixels become 1."""
     # 4-connected background pairs with the 8-connected foreground components of _drop_small.
     n, comp, stats, _ = cv2.connectedComponentsWithStats(1 - mask, connectivity=4)

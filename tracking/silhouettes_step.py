@@ -33,6 +33,7 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import dataclasses
+import hashlib
 import itertools
 import re
 from collections.abc import Callable, Iterator, Sequence
@@ -44,10 +45,17 @@ import cv2
 import numpy as np
 
 from recon.errors import UserError
+from recon.images import IMAGE_SUFFIXES
 from recon.progress import bar
 from recon.workspace import StepRecord, Timer, Workspace, atomic_output, fingerprint
 from tracking.cameras import Camera
-from tracking.silhouette import BackgroundModel, SilhouetteConfig, silhouette_from_frame
+from tracking.hull import HullCheckConfig, consistent_silhouettes
+from tracking.silhouette import (
+    BackgroundModel,
+    SilhouetteConfig,
+    fill_holes,
+    silhouette_from_frame,
+)
 from tracking.video import STEP as INIT_STEP
 from tracking.video import content_box, read_frames, video_info, video_path, workspace_cameras
 
@@ -82,6 +90,15 @@ class SilhouettesConfig:
         default=None, metadata={"help": "last frame to process, inclusive (default: the last)"})
     frame_step: int = field(
         default=1, metadata={"help": "process every N-th frame from --first (1: all)"})
+    background_images: Path | None = field(
+        default=None,
+        metadata={"help": "folder of photos of the scene taken by the fixed cameras, one per "
+                  "camera with the camera's name in the file name (cam01_ext.png for cam01), "
+                  "at the video's size or the calibrated size the video was scaled from; with "
+                  "--background median they replace the median where the subject moved (where "
+                  "a subject who stays put is part of the median); they may show other people "
+                  "or objects: the multi-view check removes what one camera alone sees"},
+    )  # fmt: skip
     logged_frames: int = field(
         default=5,
         metadata={"help": "frames per camera logged with their masks to logs/silhouettes.rrd"},
@@ -89,6 +106,10 @@ class SilhouettesConfig:
     thresholds: SilhouetteConfig = field(
         default_factory=SilhouetteConfig,
         metadata={"help": "classification thresholds and clean-up (SilhouetteConfig flags)"},
+    )
+    hull: HullCheckConfig = field(
+        default_factory=HullCheckConfig,
+        metadata={"help": "multi-view consistency of the silhouettes (HullCheckConfig flags)"},
     )
 
     def __post_init__(self) -> None:
@@ -106,6 +127,9 @@ class SilhouettesConfig:
                                 f"got {getattr(self, name)}")
         if self.last is not None and self.last < self.first:
             raise UserError(f"--last {self.last} is before --first {self.first}")
+        if self.background_images is not None and self.background_frames is not None:
+            raise UserError("--background-images completes the median background; with "
+                            f"--background {self.background} the empty scene is in the video")
 
     @property
     def background_frames(self) -> tuple[int, int] | None:
@@ -176,6 +200,104 @@ def _free_median(frames: list[np.ndarray], free: np.ndarray, previous: Backgroun
         mean[r0:r1][ok] = med[ok]
         std[r0:r1][ok] = _MAD_TO_STD * mad[ok]
     return BackgroundModel(mean, std)
+
+
+_MIN_PHOTO_AGREEMENT = 0.3
+"""Least fraction of the pixels away from the subject where a camera's background photo must
+agree with its video's median (a photo from another camera or position agrees nearly nowhere;
+the Pose2Sim demo's photos agree on 79-93%)."""
+
+
+def with_background_photo(model: BackgroundModel, frames: list[np.ndarray], photo: np.ndarray,
+                          thresholds: SilhouetteConfig | None = None,
+                          ) -> tuple[BackgroundModel, dict[str, Any]]:  # fmt: skip
+    """The median background `model` of `frames` with a photo of the empty scene (H, W, 3)
+    uint8 put in where the subject moved, and what was done (``area``: fraction of the image
+    taken from the photo; ``agreement``: fraction of the rest where the photo matches the
+    median; ``gain``: per-channel factor applied to the photo).
+
+    Where the subject stands in most frames the median *is* the subject (a person balancing on
+    one spot: the torso and shorts). Where it moved is known: the union of its silhouettes
+    against `model` over `frames`, closed over 3% of the image's larger side, grown by 1% and
+    with its holes filled (what the subject always covers is enclosed by where it moved). There
+    the photo, brought to the video's exposure by a per-channel gain measured where both
+    agree, is the background, with no spread of its own (the classification's ``min_std``
+    floor). A photo shot at another time may show people or objects the video does not: the
+    multi-view check (`tracking.hull`) removes such one-camera blobs from the silhouettes.
+    """
+    thresholds = thresholds or SilhouetteConfig()
+    if photo.shape != model.shape:
+        raise ValueError(f"photo is {photo.shape} but the background model is {model.shape}")
+    h, w = photo.shape[:2]
+    moved = np.zeros((h, w), np.uint8)
+    for frame in frames:
+        moved |= silhouette_from_frame(frame, model, thresholds).astype(np.uint8)
+    size = max(h, w)
+    region = cv2.morphologyEx(moved, cv2.MORPH_CLOSE, _disc(round(0.03 * size)))
+    region = cv2.dilate(region, _disc(round(0.01 * size)))
+    region = fill_holes(region, h * w).astype(bool)
+    picture = photo.astype(np.float32)
+    std = np.maximum(model.std, np.float32(thresholds.min_std))
+    agree = (np.abs(picture - model.mean) < thresholds.lower_sigma * std).all(axis=2) & ~region
+    agreement = float(agree.sum() / max(1, (~region).sum()))
+    if agreement < _MIN_PHOTO_AGREEMENT:
+        return model, {"area": 0.0, "agreement": agreement, "gain": None}
+    gain = [float(np.median(model.mean[..., c][agree] / np.maximum(picture[..., c][agree], 1.0)))
+            for c in range(picture.shape[2])]  # fmt: skip
+    picture *= np.asarray(gain, np.float32)
+    inside = region[..., None]
+    combined = BackgroundModel(np.where(inside, picture, model.mean),
+                               np.where(inside, np.float32(0), model.std))
+    return combined, {"area": float(region.mean()), "agreement": agreement, "gain": gain}
+
+
+def _disc(diameter: int) -> np.ndarray:
+    d = max(3, diameter | 1)
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (d, d))
+
+
+def background_images(folder: Path, cameras: Sequence[Camera]) -> dict[str, Path]:
+    """Camera name -> its photo in `folder`: the one image whose file name contains the
+    camera's name as a word (``cam01_ext.png`` for cam01, not for cam010); one-line errors for
+    a missing folder, no photo of any camera, or two photos of one."""
+    if not folder.is_dir():
+        raise UserError(f"--background-images {folder}: no such folder")
+    images = sorted(p for p in folder.iterdir()
+                    if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
+    found: dict[str, Path] = {}
+    for camera in cameras:
+        word = re.compile(rf"(?<![0-9a-z]){re.escape(camera.name.lower())}(?![0-9a-z])")
+        matches = [p for p in images if word.search(p.stem.lower())]
+        if len(matches) > 1:
+            raise UserError(f"--background-images {folder}: {len(matches)} images name camera "
+                            f"{camera.name} ({', '.join(p.name for p in matches[:3])}); keep one")
+        if matches:
+            found[camera.name] = matches[0]
+    if not found:
+        raise UserError(f"--background-images {folder}: no image names a camera "
+                        f"({', '.join(c.name for c in cameras)})")
+    return found
+
+
+def read_background_image(path: Path, camera: Camera) -> np.ndarray:
+    """The photo (H, W, 3) uint8 at the camera's video size: as it is, or, when it has the size
+    the video was scaled from (`tracking.video` letterboxed videos), scaled by the same factor
+    and centred between black bars."""
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        raise UserError(f"cannot read background image {path}")
+    h, w = image.shape[:2]
+    if (h, w) == (camera.height, camera.width):
+        return image
+    s = min(camera.width / w, camera.height / h)
+    if abs(s - 1.0) > 0.1:
+        raise UserError(f"background image {path.name} is {w}x{h}, camera {camera.name}'s video "
+                        f"{camera.width}x{camera.height}")
+    pad_x, pad_y = (camera.width - s * w) / 2, (camera.height - s * h) / 2
+    # Pixel centres at +0.5 on both sides: x_video = s * x_photo + pad, in OpenCV's integer
+    # centres x' = s * x + (s / 2 + pad - 1 / 2).
+    warp = np.float32([[s, 0, s / 2 + pad_x - 0.5], [0, s, s / 2 + pad_y - 0.5]])
+    return cv2.warpAffine(image, warp, (camera.width, camera.height), flags=cv2.INTER_LINEAR)
 
 
 def _middle(arrays: list[np.ndarray]) -> np.ndarray:
@@ -267,8 +389,12 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
         background_frames = _spread(n_frames, config.background_samples, odd=True)
         background_text = (f"temporal median of {len(background_frames)} frames spread over "
                            f"0-{n_frames - 1}")
+    photos = (background_images(config.background_images, cameras)
+              if config.background_images is not None else {})
     settings = {**dataclasses.asdict(config), "last": last}
-    fp = fingerprint(STEP, settings, _upstream_fingerprint(ws, cameras))
+    fp = fingerprint(STEP, settings, _upstream_fingerprint(ws, cameras),
+                     {name: hashlib.sha256(path.read_bytes()).hexdigest()
+                      for name, path in photos.items()})
     outputs = [ws.silhouettes_dir / c.name for c in cameras]
     if done := ws.reusable(STEP, fp, *outputs, overwrite=overwrite):
         return done
@@ -276,10 +402,12 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
     fps = {name: info[3] for name, info in counts.items()}
     logged = ({frames[i] for i in _spread(len(frames), config.logged_frames, odd=False)}
               if config.logged_frames else set())
+    check = config.hull.multi_view_check and len(cameras) >= 2
     per_camera: dict[str, dict[str, Any]] = {}
     warnings: list[str] = []
     map_cameras = _camera_map.get()
-    with (Timer() as timer, bar(len(frames) * len(cameras), "silhouettes", "frame") as progress,
+    units = len(frames) * (len(cameras) + check)
+    with (Timer() as timer, bar(units, "silhouettes", "frame") as progress,
           atomic_output(ws.silhouettes_dir) as tmp,
           recording.step_recording(ws.log_path(STEP), STEP) as rec):
         tmp.mkdir()
@@ -287,36 +415,43 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
         jobs = [_CameraJob(root=ws.root.resolve(), camera=camera, frames=frames,
                            background_frames=background_frames, median=span is None,
                            thresholds=config.thresholds, out=tmp.resolve() / camera.name,
-                           logged=frozenset(logged), passes=config.background_passes)
+                           passes=config.background_passes,
+                           background_image=photos.get(camera.name))
                 for camera in cameras]
         if map_cameras is not None:
-            done_cameras = _silhouettes_as_tasks(map_cameras, jobs)
-        else:  # one camera after the other in this process, logged as each one finishes
-            done_cameras = (camera_silhouettes(job, progress) for job in jobs)
-        for camera, result in zip(cameras, done_cameras, strict=True):
-            entity = f"world/cameras/{recording.entity_name(camera.name)}"
-            recording.log_camera_image(rec, image_name=camera.name, image_path=None, K=camera.K,
-                                       width=camera.width, height=camera.height,
-                                       cam_from_world=camera.cam_from_world)
-            recording.log_frame_image(rec, f"backgrounds/{recording.entity_name(camera.name)}",
-                                      result.background)
-            for index, frame, mask in result.logged:
-                time_s = index / fps[camera.name] if fps[camera.name] else None
-                recording.log_frame_image(rec, f"{entity}/image", frame, index, time_s)
-                recording.log_silhouette(rec, f"{entity}/image/silhouette", mask, index,
-                                         time_s or 0.0)
-            if map_cameras is not None:
-                progress.update(len(frames))
-            fractions, empty, border = result.fractions, result.empty, result.border
-            rate = fps[camera.name] or 1.0
-            recording.log_frame_series(rec, f"silhouettes/{recording.entity_name(camera.name)}"
-                                       "/foreground_fraction", np.asarray(frames),
-                                       np.asarray(frames) / rate, np.asarray(fractions))
+            done = _silhouettes_as_tasks(map_cameras, jobs)
+            progress.update(len(frames) * len(cameras))
+        else:  # one camera after the other in this process
+            done = [camera_silhouettes(job, progress) for job in jobs]
+        if check:
+            progress.set_postfix_str("multi-view check")
+            done = _checked_by_hull(map_cameras, _HullJob(
+                root=ws.root.resolve(), cameras=cameras, outs=[job.out for job in jobs],
+                frames=frames, config=config.hull), done, progress)
+        for camera, result in zip(cameras, done, strict=True):
+            _log_camera(rec, ws, camera, result, tmp / camera.name, sorted(logged), frames,
+                        fps[camera.name])
+            fractions, empty, border = (result.masks.fractions, result.masks.empty,
+                                        result.masks.border)
             per_camera[camera.name] = {
                 "frames": len(fractions),
                 "foreground_fraction": {"min": min(fractions), "median":
                                         float(np.median(fractions)), "max": max(fractions)},
                 "empty_frames": empty, "border_frames": border}
+            if result.removed is not None:
+                per_camera[camera.name]["hull_removed"] = {
+                    "median": float(np.median(result.removed)), "max": max(result.removed)}
+            photo = result.background.photo
+            if photo is not None:
+                per_camera[camera.name]["background_image"] = photo
+                if photo["gain"] is None:
+                    warnings.append(
+                        f"{camera.name}: background image {photo['image']} agrees with the "
+                        f"video on only {photo['agreement']:.0%} of the pixels away from the "
+                        "subject (another camera's, or the camera moved?): not used")
+            elif photos:
+                warnings.append(f"{camera.name}: no background image in "
+                                f"{config.background_images}: the temporal median alone")
             warnings.extend(_warnings(camera.name, empty, border, len(fractions),
                                       config.frame_step, span is None))
         recording.log_table(rec, "silhouettes/summary", "Foreground fraction per camera", [
@@ -324,10 +459,37 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
              "median": s["foreground_fraction"]["median"], "max": s["foreground_fraction"]["max"],
              "empty": len(s["empty_frames"]), "at border": len(s["border_frames"])}
             for name, s in per_camera.items()])
+    if photos:
+        background_text += (f", with the photos of {config.background_images} where the "
+                            "subject moved")
     summary = {"cameras": per_camera, "frames": [config.first, last, config.frame_step],
                "processed": len(frames), "background": background_text,
-               "background_frames": background_frames, "warnings": warnings}
+               "background_frames": background_frames, "multi_view_check": check,
+               "warnings": warnings}
     return ws.record_step(STEP, fp, config=settings, seconds=timer.seconds, summary=summary)
+
+
+def _log_camera(rec: Any, ws: Workspace, camera: Camera, result: _CameraResult, masks: Path,
+                logged: list[int], frames: list[int], fps: float) -> None:  # fmt: skip
+    """One camera's part of the recording: the camera, its background, the logged frames with
+    their final masks, and the foreground fraction over frames."""
+    from recon import recording
+
+    entity = f"world/cameras/{recording.entity_name(camera.name)}"
+    recording.log_camera_image(rec, image_name=camera.name, image_path=None, K=camera.K,
+                               width=camera.width, height=camera.height,
+                               cam_from_world=camera.cam_from_world)
+    recording.log_frame_image(rec, f"backgrounds/{recording.entity_name(camera.name)}",
+                              np.clip(result.background.model.mean, 0, 255).astype(np.uint8))
+    for index, frame in read_frames(ws, camera.name, logged):
+        time_s = index / fps if fps else None
+        mask = cv2.imread(str(masks / f"{index:06d}.png"), cv2.IMREAD_GRAYSCALE) > 127
+        recording.log_frame_image(rec, f"{entity}/image", frame, index, time_s)
+        recording.log_silhouette(rec, f"{entity}/image/silhouette", mask, index, time_s or 0.0)
+    rate = fps or 1.0
+    recording.log_frame_series(rec, f"silhouettes/{recording.entity_name(camera.name)}"
+                               "/foreground_fraction", np.asarray(frames),
+                               np.asarray(frames) / rate, np.asarray(result.masks.fractions))
 
 
 CameraMap = Callable[..., list[Any]]
@@ -397,15 +559,14 @@ class _CameraJob:
     median: bool
     thresholds: SilhouetteConfig
     out: Path
-    logged: frozenset[int]
     passes: int = 2
+    background_image: Path | None = None
 
     def frames_job(self, frames: list[int], model: int = 0) -> _FramesJob:
         """The classification of ``frames`` (some of ``self.frames``) against the ``model``-th
         of the background models given with it."""
         return _FramesJob(root=self.root, camera=self.camera, frames=frames,
-                          thresholds=self.thresholds, out=self.out,
-                          logged=self.logged & frozenset(frames), model=model)
+                          thresholds=self.thresholds, out=self.out, model=model)
 
 
 @dataclass(frozen=True)
@@ -418,36 +579,62 @@ class _FramesJob:
     frames: list[int]
     thresholds: SilhouetteConfig
     out: Path
-    logged: frozenset[int]
     model: int
     """Which of the background models given with the job is this camera's."""
 
 
 @dataclass(frozen=True)
+class _HullJob:
+    """Some processed frames whose silhouettes, all cameras' at once, go through the
+    multi-view check (:func:`frames_consistency`); small and picklable."""
+
+    root: Path
+    cameras: list[Camera]
+    outs: list[Path]
+    frames: list[int]
+    config: HullCheckConfig
+
+
+@dataclass(frozen=True)
+class _Background:
+    model: BackgroundModel
+    photo: dict[str, Any] | None
+    """:func:`with_background_photo`'s account, with the image's name; None without a photo."""
+
+
+@dataclass(frozen=True)
 class _FramesResult:
+    """Per processed frame of one camera, in order: the silhouette's fraction of the image;
+    the frames whose silhouette is empty, and those where it touches the image border."""
+
     fractions: list[float]
     empty: list[int]
     border: list[int]
-    logged: list[tuple[int, np.ndarray, np.ndarray]]
-    """(frame index, frame, mask) of the frames to log."""
+
+    @classmethod
+    def joined(cls, parts: Sequence[_FramesResult]) -> _FramesResult:
+        """The results of consecutive runs of frames as one."""
+        return cls([f for p in parts for f in p.fractions], [i for p in parts for i in p.empty],
+                   [i for p in parts for i in p.border])
 
 
 @dataclass(frozen=True)
 class _CameraResult:
-    background: np.ndarray
-    """The background model's mean, uint8, as logged."""
-    fractions: list[float]
-    empty: list[int]
-    border: list[int]
-    logged: list[tuple[int, np.ndarray, np.ndarray]]
-    """(frame index, frame, mask) of the frames to log."""
+    background: _Background
+    masks: _FramesResult
+    """Statistics of the final masks."""
+    removed: list[float] | None = None
+    """Per frame, the fraction of the silhouette the multi-view check removed (None: no check)."""
 
-    @classmethod
-    def merged(cls, model: BackgroundModel, parts: list[_FramesResult]) -> _CameraResult:
-        """One camera's result from its runs' results, given in frame order."""
-        return cls(np.clip(model.mean, 0, 255).astype(np.uint8),
-                   [f for p in parts for f in p.fractions], [i for p in parts for i in p.empty],
-                   [i for p in parts for i in p.border], [x for p in parts for x in p.logged])
+
+def _stats(index: int, mask: np.ndarray, box: tuple[int, int, int, int], into: _FramesResult
+           ) -> None:  # fmt: skip
+    fraction = float(mask.mean())
+    into.fractions.append(fraction)
+    if fraction == 0.0:
+        into.empty.append(index)
+    elif _touches_border(mask, box):
+        into.border.append(index)
 
 
 def camera_silhouettes(job: _CameraJob, progress: Any = None) -> _CameraResult:
@@ -455,18 +642,31 @@ def camera_silhouettes(job: _CameraJob, progress: Any = None) -> _CameraResult:
     background model, then its frames in order (what a plain `mocap silhouettes` runs)."""
     if progress is not None:
         progress.set_postfix_str(f"{job.camera.name}: background")
-    model = camera_background(job)
+    background = camera_background(job)
     if progress is not None:
         progress.set_postfix_str(job.camera.name)
     job.out.mkdir()
-    return _CameraResult.merged(model, [frame_silhouettes(job.frames_job(job.frames), [model],
-                                                          progress)])
+    return _CameraResult(background, frame_silhouettes(job.frames_job(job.frames),
+                                                       [background.model], progress))
 
 
-def camera_background(job: _CameraJob) -> BackgroundModel:
+def camera_background(job: _CameraJob) -> _Background:
     """The background model of one camera: one independent task."""
-    return _background(Workspace(job.root), job.camera, job.background_frames, median=job.median,
-                       thresholds=job.thresholds, passes=job.passes)
+    ws = Workspace(job.root)
+    frames = [frame for _, frame in read_frames(ws, job.camera.name, job.background_frames)]
+    for frame in frames:
+        if frame.shape[:2] != (job.camera.height, job.camera.width):
+            raise UserError(f"video {video_path(ws, job.camera.name).name} is "
+                            f"{frame.shape[1]}x{frame.shape[0]} but cameras.json says "
+                            f"{job.camera.width}x{job.camera.height} for camera {job.camera.name}")
+    if not job.median:
+        return _Background(BackgroundModel.from_frames(frames), None)
+    model = median_background(frames, job.thresholds, job.passes)
+    if job.background_image is None:
+        return _Background(model, None)
+    photo = read_background_image(job.background_image, job.camera)
+    model, account = with_background_photo(model, frames, photo, job.thresholds)
+    return _Background(model, {"image": job.background_image.name, **account})
 
 
 def frame_silhouettes(job: _FramesJob, models: Sequence[BackgroundModel], progress: Any = None
@@ -476,53 +676,71 @@ def frame_silhouettes(job: _FramesJob, models: Sequence[BackgroundModel], progre
     ws = Workspace(job.root)
     model = models[job.model]
     box = content_box(ws, job.camera)
-    out = job.out
-    fractions: list[float] = []
-    empty: list[int] = []
-    border: list[int] = []
-    logged = []
+    result = _FramesResult([], [], [])
     for index, frame in read_frames(ws, job.camera.name, job.frames):
         mask = silhouette_from_frame(frame, model, job.thresholds)
-        if not cv2.imwrite(str(out / f"{index:06d}.png"), mask.astype(np.uint8) * 255):
-            raise UserError(f"could not write {out / f'{index:06d}.png'}")
-        fraction = float(mask.mean())
-        fractions.append(fraction)
-        if fraction == 0.0:
-            empty.append(index)
-        elif _touches_border(mask, box):
-            border.append(index)
-        if index in job.logged:
-            logged.append((index, frame, mask))
+        _write_mask(job.out / f"{index:06d}.png", mask)
+        _stats(index, mask, box, result)
         if progress is not None:
             progress.update()
-    return _FramesResult(fractions, empty, border, logged)
+    return result
+
+
+def frames_consistency(job: _HullJob, progress: Any = None
+                       ) -> tuple[list[_FramesResult], list[list[float]]]:  # fmt: skip
+    """The multi-view check (`tracking.hull`) of ``job.frames``: every camera's mask read from
+    its folder and rewritten when the check removed part of it: one independent task. Per
+    camera, the statistics of the final masks and the fraction removed per frame."""
+    ws = Workspace(job.root)
+    boxes = [content_box(ws, camera) for camera in job.cameras]
+    results = [_FramesResult([], [], []) for _ in job.cameras]
+    removed: list[list[float]] = [[] for _ in job.cameras]
+    for index in job.frames:
+        paths = [out / f"{index:06d}.png" for out in job.outs]
+        masks = [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) > 127 for p in paths]
+        kept = consistent_silhouettes(job.cameras, masks, job.config, boxes)
+        for k, (path, mask, final) in enumerate(zip(paths, masks, kept, strict=True)):
+            before = int(mask.sum())
+            if int(final.sum()) != before:
+                _write_mask(path, final)
+            removed[k].append(1.0 - final.sum() / before if before else 0.0)
+            _stats(index, final, boxes[k], results[k])
+        if progress is not None:
+            progress.update()
+    return results, removed
+
+
+def _write_mask(path: Path, mask: np.ndarray) -> None:
+    if not cv2.imwrite(str(path), mask.astype(np.uint8) * 255):
+        raise UserError(f"could not write {path}")
 
 
 def _silhouettes_as_tasks(map_fn: CameraMap, jobs: list[_CameraJob]) -> list[_CameraResult]:
     """:func:`camera_silhouettes` of every job, as the fan-outs of :func:`cameras_mapped_by`."""
-    models = map_fn(camera_background, jobs)
+    backgrounds = map_fn(camera_background, jobs)
     for job in jobs:
         job.out.mkdir()
     runs = [frame_chunks(job.frames) for job in jobs]
     results = iter(map_fn(frame_silhouettes, [
         job.frames_job(frames, model=k) for k, job in enumerate(jobs) for frames in runs[k]],
-        tuple(models)))
-    return [_CameraResult.merged(model, [next(results) for _ in camera_runs])
-            for model, camera_runs in zip(models, runs, strict=True)]
+        tuple(b.model for b in backgrounds)))
+    return [_CameraResult(b, _FramesResult.joined([next(results) for _ in camera_runs]))
+            for b, camera_runs in zip(backgrounds, runs, strict=True)]
 
 
-def _background(ws: Workspace, camera: Camera, indexes: list[int], *, median: bool,
-                thresholds: SilhouetteConfig | None = None, passes: int = 2,
-                ) -> BackgroundModel:  # fmt: skip
-    frames = [frame for _, frame in read_frames(ws, camera.name, indexes)]
-    for frame in frames:
-        if frame.shape[:2] != (camera.height, camera.width):
-            raise UserError(f"video {video_path(ws, camera.name).name} is "
-                            f"{frame.shape[1]}x{frame.shape[0]} but cameras.json says "
-                            f"{camera.width}x{camera.height} for camera {camera.name}")
-    if median:
-        return median_background(frames, thresholds, passes)
-    return BackgroundModel.from_frames(frames)
+def _checked_by_hull(map_fn: CameraMap | None, job: _HullJob, done: list[_CameraResult],
+                     progress: Any) -> list[_CameraResult]:  # fmt: skip
+    """``done`` after the multi-view check of every processed frame: in this process, or as a
+    task per run of frames (:func:`frame_chunks`) under `mocap batch`."""
+    if map_fn is None:
+        parts = [frames_consistency(job, progress)]
+    else:
+        parts = map_fn(frames_consistency, [dataclasses.replace(job, frames=run)
+                                            for run in frame_chunks(job.frames)])
+        progress.update(len(job.frames))
+    return [dataclasses.replace(
+        result, masks=_FramesResult.joined([p[0][k] for p in parts]),
+        removed=[r for p in parts for r in p[1][k]]) for k, result in enumerate(done)]
 
 
 def _warnings(name: str, empty: list[int], border: list[int], processed: int, step: int,
@@ -551,8 +769,14 @@ def summary_lines(ws: Workspace, record: StepRecord) -> list[str]:
              f"background   {s['background']}"]
     for name, cam in s["cameras"].items():
         f = cam["foreground_fraction"]
-        lines.append(f"{name:<12} foreground {f['median']:.1%} of the image (median; min "
-                     f"{f['min']:.1%}, max {f['max']:.1%})")
+        line = (f"{name:<12} foreground {f['median']:.1%} of the image (median; min "
+                f"{f['min']:.1%}, max {f['max']:.1%})")
+        if "hull_removed" in cam:
+            line += f"; the multi-view check removed {cam['hull_removed']['median']:.1%}"
+        photo = cam.get("background_image")
+        if photo is not None and photo["gain"] is not None:
+            line += f"; photo on {photo['area']:.1%} of the image"
+        lines.append(line)
     lines += [f"warning      {w}" for w in s["warnings"]]
     lines.append(f"recording    {ws.logs_dir / f'{STEP}.rrd'}")
     return lines

@@ -62,6 +62,7 @@ from tracking.body import (
 from tracking.cameras import Camera
 from tracking.contour import ContourConfig, ContourRefiner, refine_shape
 from tracking.energy import SilhouetteEnergy
+from tracking.hull import surface_voxels, visual_hull
 from tracking.render import render_views
 
 _ROOT = [PARAM_INDEX[n] for n in ("root_tx", "root_ty", "root_tz", "root_rz", "root_rx",
@@ -307,28 +308,12 @@ class SilhouetteTracker:
     # -- initialisation -------------------------------------------------------------------
     def visual_hull_points(self, masks: Sequence[np.ndarray]) -> np.ndarray:
         """(N, 3) centres of the visual hull's surface voxels, world frame."""
-        centre = _rays_meeting_point(self.cameras, masks)
-        step = self.config.voxel_m
-        n = int(np.ceil(self.config.hull_size_m / step))
-        axis = (np.arange(n) - (n - 1) / 2) * step
-        grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3) + centre
-        inside = np.ones(len(grid), bool)
-        for cam, mask in zip(self.cameras, masks, strict=True):
-            uv, depth = cam.project(grid)
-            with np.errstate(invalid="ignore"):
-                col, row = np.floor(uv[:, 0]).astype(int), np.floor(uv[:, 1]).astype(int)
-            ok = (depth > 0) & (col >= 0) & (col < cam.width) & (row >= 0) & (row < cam.height)
-            hit = np.zeros(len(grid), bool)
-            hit[ok] = mask[row[ok], col[ok]]
-            inside &= hit
-        occupied = inside.reshape(n, n, n)
-        # Surface voxels: occupied with at least one empty 6-neighbour.
-        padded = np.pad(occupied, 1)
-        interior = occupied.copy()
-        for axis_k in range(3):
-            for shift in (-1, 1):
-                interior &= np.roll(padded, shift, axis=axis_k)[1:-1, 1:-1, 1:-1]
-        return grid[(occupied & ~interior).ravel()]
+        if not all(m.any() for m in masks):
+            empty = [c.name for c, m in zip(self.cameras, masks, strict=True) if not m.any()]
+            raise TrackingLost(f"empty silhouette in {', '.join(empty)}")
+        points, n, occupied = visual_hull(self.cameras, masks, size_m=self.config.hull_size_m,
+                                          voxel_m=self.config.voxel_m)
+        return points[surface_voxels(occupied, n)]
 
     def initialise(self, masks: Sequence[np.ndarray], init: Pose | None = None) -> tuple[Pose, str]:
         """The first pose: `init` if given, else a body fitted to the visual hull, then refined
@@ -671,21 +656,3 @@ def _rig_up(cameras: Sequence[Camera], subject_in_world: np.ndarray) -> np.ndarr
     if abs(height) < 0.05 * spread:
         return None
     return normal * np.sign(height)
-
-
-def _rays_meeting_point(cameras: Sequence[Camera], masks: Sequence[np.ndarray]) -> np.ndarray:
-    """Least-squares meeting point of the rays through every view's silhouette centroid."""
-    a, b = np.zeros((3, 3)), np.zeros(3)
-    for cam, mask in zip(cameras, masks, strict=True):
-        rows, cols = np.nonzero(mask)
-        if len(rows) == 0:
-            raise TrackingLost(f"empty silhouette in {cam.name}")
-        # Pixel centres are at +0.5 (the convention of `tracking.cameras`).
-        pixel = np.array([cols.mean() + 0.5, rows.mean() + 0.5, 1.0])
-        xy = cam.undistort((np.linalg.solve(cam.K, pixel)[:2])[None])  # normalised
-        direction = cam.R.T @ np.array([xy[0, 0], xy[0, 1], 1.0])
-        direction /= np.linalg.norm(direction)
-        proj = np.eye(3) - np.outer(direction, direction)
-        a += proj
-        b += proj @ cam.center_in_world
-    return np.linalg.solve(a, b)

@@ -36,6 +36,7 @@ from recon.sfm import SfMConfig, cams_from_world
 from recon.synthetic import SyntheticSceneConfig, render_scene, write_scene
 from recon.workspace import Workspace
 from tests.helpers import run_cli, shared_dataset
+from tracking.silhouettes_step import SilhouettesConfig
 from tracking.synth import SynthConfig, synthesize
 from tracking.tracker import TrackConfig
 
@@ -256,29 +257,32 @@ def test_tracking_sequences_on_dask_equal_a_serial_run(cluster, tmp_path):
 
 def test_silhouettes_per_camera_and_frames_on_dask_equal_a_serial_run(cluster, tmp_path):
     """A real-video workspace: a task per camera's background model, then a task per run of
-    frames of each camera, give the very masks (PNG bytes) and summary of the serial step."""
+    frames of each camera, then a task per run of frames for the multi-view check, give the
+    very masks (PNG bytes) and summary of the serial step."""
     from distributed import Client, get_task_stream
 
-    from tests.tracking.test_video import make_blob_scene
+    from tests.tracking.test_video import make_ball_scene
     from tracking.silhouettes_step import frame_chunks
     from tracking.video import init_video
 
     cameras, frames = 3, 30
-    videos, calibration, _ = make_blob_scene(tmp_path / "scene", cameras=cameras, frames=frames)
+    videos, calibration, photos, _ = make_ball_scene(tmp_path / "scene", cameras=cameras,
+                                                     frames=frames)
     for kind in ("serial", "dask"):
         init_video(tmp_path / kind, videos, calibration)
-    serial = run_workspace(tmp_path / "serial", (BatchStep.SILHOUETTES,))
+    settings = SilhouettesConfig(background_images=photos)
+    serial = run_workspace(tmp_path / "serial", (BatchStep.SILHOUETTES,), silhouettes=settings)
     with Client(cluster) as client, get_task_stream(client) as stream:
         report = run_batch([tmp_path / "dask"], BatchConfig(
-            scheduler=cluster.scheduler_address, steps=(BatchStep.SILHOUETTES,)))
+            scheduler=cluster.scheduler_address, steps=(BatchStep.SILHOUETTES,)),
+            silhouettes=settings)
     for result in (serial, report.results[0]):
         assert [(s.step, s.status) for s in result.steps] == [
             (BatchStep.SILHOUETTES, StepStatus.DONE)], result.line()
-    # Frames 0, 1, 28, 29 are empty and others touch the border: the runs' results were merged
-    # in frame order, as the serial loop lists them.
+    # The runs' results were merged in frame order, as the serial loop lists them; cam00's
+    # photo shows a block that the multi-view check removes.
     summary = serial.steps[0].summary
-    assert summary["cameras"]["cam00"]["empty_frames"] == [0, 1, 28, 29]
-    assert summary["cameras"]["cam00"]["border_frames"]
+    assert summary["cameras"]["cam00"]["hull_removed"]["median"] > 0.05
     assert summary == report.results[0].steps[0].summary
 
     keys = [str(t["key"]) for t in stream.data]
@@ -287,13 +291,14 @@ def test_silhouettes_per_camera_and_frames_on_dask_equal_a_serial_run(cluster, t
     assert [len(r) for r in runs] == [10, 10, 10]
     # Each run of each camera ran as a task: more tasks than cameras classified frames.
     assert sum(k.startswith("frame_silhouettes-") for k in keys) == cameras * len(runs) > cameras
+    assert sum(k.startswith("frames_consistency-") for k in keys) == len(runs)
     assert not any(k.startswith("camera_silhouettes") for k in keys)
 
     a, b = (Workspace(tmp_path / kind).silhouettes_dir for kind in ("serial", "dask"))
     names = sorted(p.relative_to(a) for p in a.rglob("*.png"))
     assert len(names) == cameras * frames
     assert names == sorted(p.relative_to(b) for p in b.rglob("*.png"))
-    assert any(cv2.imread(str(a / n), cv2.IMREAD_GRAYSCALE).any() for n in names)
+    assert all(cv2.imread(str(a / n), cv2.IMREAD_GRAYSCALE).any() for n in names)
     for name in names:
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
     assert not list(tmp_path.glob("dask/silhouettes*partial*"))

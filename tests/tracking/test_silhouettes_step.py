@@ -14,8 +14,16 @@ import pytest
 from recon.errors import UserError
 from recon.workspace import Workspace
 from tests.helpers import recording_entities, run_cli, shared_dataset
-from tests.tracking.test_video import FRAMES, HEIGHT, WIDTH, digest, make_blob_scene
+from tests.tracking.test_video import (
+    FRAMES,
+    HEIGHT,
+    WIDTH,
+    digest,
+    make_ball_scene,
+    make_blob_scene,
+)
 from tracking.cameras import read_cameras
+from tracking.hull import HullCheckConfig
 from tracking.silhouette import BackgroundModel
 from tracking.silhouettes_step import (
     SilhouettesConfig,
@@ -32,6 +40,11 @@ def blob_workspace(tmp_path_factory: pytest.TempPathFactory):
     folder = tmp_path_factory.mktemp("blob")
     videos, calibration, truth = make_blob_scene(folder)
     return init_video(folder / "ws", videos, calibration), videos, truth
+
+
+# The blob scene draws an ellipse in each camera's image with no 3D object behind it: the
+# multi-view check, which keeps what the cameras agree on in 3D, is off for it.
+NO_CHECK = HullCheckConfig(multi_view_check=False)
 
 
 def read_mask(path: Path) -> np.ndarray:
@@ -99,7 +112,7 @@ def test_free_median_is_the_median_over_the_free_frames():
 def test_silhouettes_of_a_moving_blob_match_the_truth(blob_workspace):
     ws, videos, truth = blob_workspace
     before = digest(videos)
-    record = make_silhouettes(ws, SilhouettesConfig())
+    record = make_silhouettes(ws, SilhouettesConfig(hull=NO_CHECK))
     assert digest(videos) == before  # the inputs are only read
     for k, masks in enumerate(truth):
         folder = ws.silhouettes_dir / f"cam{k:02d}"
@@ -128,7 +141,8 @@ def test_silhouettes_of_a_moving_blob_match_the_truth(blob_workspace):
         record.summary["warnings"])
     # Unchanged settings: reused without touching the masks; a changed setting recomputes.
     stamp = (ws.silhouettes_dir / "cam00" / "000005.png").stat().st_mtime_ns
-    assert make_silhouettes(ws, SilhouettesConfig()).fingerprint == record.fingerprint
+    assert make_silhouettes(ws, SilhouettesConfig(hull=NO_CHECK)).fingerprint == (
+        record.fingerprint)
     assert (ws.silhouettes_dir / "cam00" / "000005.png").stat().st_mtime_ns == stamp
 
 
@@ -136,7 +150,7 @@ def test_frame_range_and_empty_background_frames(blob_workspace, tmp_path: Path)
     ws, _, truth = blob_workspace
     # Frames 0-1 show the empty scene: the thesis' mean-and-deviation background.
     config = SilhouettesConfig(background="frames:0-1", first=4, last=16, frame_step=4,
-                               logged_frames=0)
+                               logged_frames=0, hull=NO_CHECK)
     record = make_silhouettes(ws, config)
     assert sorted(p.name for p in (ws.silhouettes_dir / "cam01").iterdir()) == [
         "000004.png", "000008.png", "000012.png", "000016.png"]
@@ -150,6 +164,57 @@ def test_frame_range_and_empty_background_frames(blob_workspace, tmp_path: Path)
         SilhouettesConfig(background="empty")
     with pytest.raises(UserError, match="not a video workspace"):
         make_silhouettes(Workspace(tmp_path), SilhouettesConfig())
+
+
+def test_background_photos_recover_a_subject_who_stays_put(tmp_path: Path):
+    """A ball wobbling about one spot is part of its video's median; each camera's photo of the
+    empty scene (5% darker, and in cam00's a blue block the video never shows) replaces the
+    median where it moved, and the multi-view check removes cam00's block."""
+    videos, calibration, photos, truth = make_ball_scene(tmp_path / "scene")
+    ws = init_video(tmp_path / "ws", videos, calibration)
+    before = digest(photos)
+
+    def scores(record) -> list[float]:
+        means = []
+        for k, masks in enumerate(truth):
+            folder = ws.silhouettes_dir / f"cam{k:02d}"
+            means.append(float(np.mean([iou(read_mask(folder / f"{i:06d}.png"), m)
+                                        for i, m in enumerate(masks)])))
+        return means
+
+    median = scores(make_silhouettes(ws, SilhouettesConfig()))
+    assert max(median) < 0.4  # the median alone loses the ball's core
+    record = make_silhouettes(ws, SilhouettesConfig(background_images=photos))
+    assert digest(photos) == before  # only read
+    with_photos = scores(record)
+    assert min(with_photos[1:]) >= 0.92 and with_photos[0] >= 0.85, with_photos
+    for name, camera in record.summary["cameras"].items():
+        photo = camera["background_image"]
+        assert photo["image"] == f"{name}_ext.png" and 0.05 < photo["area"] < 0.3
+        assert photo["gain"] == pytest.approx([1 / 0.95] * 3, rel=0.02)  # the exposure
+        assert photo["agreement"] > 0.9
+    assert record.summary["cameras"]["cam01"]["hull_removed"]["max"] < 0.01
+    assert record.summary["cameras"]["cam00"]["hull_removed"]["median"] > 0.05  # the block
+    off = scores(make_silhouettes(ws, SilhouettesConfig(background_images=photos,
+                                                        hull=NO_CHECK)))
+    assert off[0] < with_photos[0] - 0.05 and off[1:] == pytest.approx(with_photos[1:])
+    # A photo that is not of the camera's view (upside down here) is not used, with a warning.
+    wrong = tmp_path / "wrong"
+    wrong.mkdir()
+    for k in range(len(truth)):
+        photo = cv2.imread(str(photos / f"cam{k:02d}_ext.png"))
+        cv2.imwrite(str(wrong / f"cam{k:02d}.png"), photo[::-1, ::-1])
+    record = make_silhouettes(ws, SilhouettesConfig(background_images=wrong))
+    assert record.summary["cameras"]["cam00"]["background_image"]["gain"] is None
+    assert any(w.startswith("cam00: background image cam00.png agrees with the video on only")
+               for w in record.summary["warnings"])
+    # Bad input: one-line errors.
+    with pytest.raises(UserError, match="no such folder"):
+        make_silhouettes(ws, SilhouettesConfig(background_images=tmp_path / "nothing"))
+    with pytest.raises(UserError, match="no image names a camera"):
+        make_silhouettes(ws, SilhouettesConfig(background_images=videos))
+    with pytest.raises(UserError, match="completes the median background"):
+        SilhouettesConfig(background="frames:0-3", background_images=photos)
 
 
 def test_frame_chunks_split_frames_into_runs_and_bound_the_redecoding():
@@ -178,7 +243,8 @@ def test_the_cli_reports_frames_without_subject_and_records_them(tmp_path: Path)
     ws = tmp_path / "ws"
     result = run_cli("init-video", ws, "--videos", videos, "--calibration", calibration)
     assert result.returncode == 0, result.stderr
-    result = run_cli("silhouettes", ws, "--logged-frames", "2", "--min-area", "80")
+    result = run_cli("silhouettes", ws, "--logged-frames", "2", "--min-area", "80",
+                     "--no-multi-view-check")
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()
     assert lines[0].startswith(f"silhouettes  2 cameras x {FRAMES} frames (0-{FRAMES - 1})")
@@ -195,7 +261,7 @@ def test_the_cli_reports_frames_without_subject_and_records_them(tmp_path: Path)
         assert any(e.startswith(needed) for e in entities), (needed, sorted(entities))
     assert not list((ws / "logs").glob("*partial*"))
     # An empty-silhouette-in-every-frame workspace gets its own clear warning.
-    result = run_cli("silhouettes", ws, "--first", "0", "--last", "1")
+    result = run_cli("silhouettes", ws, "--first", "0", "--last", "1", "--no-multi-view-check")
     assert result.returncode == 0 and "every silhouette is empty" in result.stdout
 
 

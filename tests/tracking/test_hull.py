@@ -1,0 +1,78 @@
+"""Visual hulls and the multi-view consistency check (`tracking.hull`) against exact balls."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from recon.errors import UserError
+from tests.tracking.test_video import ball_masks
+from tracking.cameras import ring_cameras
+from tracking.hull import (
+    HullCheckConfig,
+    consistent_silhouettes,
+    rays_meeting_point,
+    surface_voxels,
+    visual_hull,
+)
+
+CAMERAS = ring_cameras(4, 3.0, 1.5, width=320, height=240, focal_px=300.0)
+CENTRE = np.array([0.1, 0.2, -0.15])
+
+
+def test_the_visual_hull_of_a_ball_holds_the_ball():
+    masks = ball_masks(CAMERAS, CENTRE, 0.3)
+    np.testing.assert_allclose(rays_meeting_point(CAMERAS, masks), CENTRE, atol=0.02)
+    points, n, occupied = visual_hull(CAMERAS, masks, size_m=1.2, voxel_m=0.03)
+    distance = np.linalg.norm(points - CENTRE, axis=1)
+    assert occupied[distance < 0.28].all()  # the ball is inside its hull
+    # Four views carve a hull a little larger than the ball, never much larger.
+    assert occupied.sum() * 0.03**3 < 1.6 * (4 / 3) * np.pi * 0.3**3
+    surface = surface_voxels(occupied, n)
+    assert surface.sum() < occupied.sum() and not surface[distance < 0.2].any()
+
+
+def test_the_check_removes_what_one_camera_alone_sees():
+    truth = ball_masks(CAMERAS, CENTRE, 0.3)
+    masks = [m.copy() for m in truth]
+    masks[0][200:230, 20:80] = True  # a reflection on the floor, in one view only
+    rows, cols = np.nonzero(truth[1])
+    masks[1][rows.min():rows.max(), cols.max() + 1:cols.max() + 30] = True  # attached to it
+    kept = consistent_silhouettes(CAMERAS, masks)
+    for k, (got, want) in enumerate(zip(kept, truth, strict=True)):
+        assert (got & want).sum() >= 0.99 * want.sum(), k  # the ball stays
+    assert not kept[0][200:230, 20:80].any()
+    # Of the attached blob, a sliver next to the ball is left: the rays there pass within the
+    # four-view hull of a ball, larger than the ball (plus the dilation of 3 px here and the
+    # voxels' size).
+    extra = kept[1] & ~truth[1]
+    assert extra.sum() < 0.25 * (masks[1] & ~truth[1]).sum()
+    assert not extra[:, cols.max() + 15:].any()
+    # Off, the masks come back as they are.
+    off = consistent_silhouettes(CAMERAS, masks, HullCheckConfig(multi_view_check=False))
+    assert all((a == b).all() for a, b in zip(off, masks, strict=True))
+
+
+def test_a_subject_outside_one_view_or_empty_in_one_is_kept_in_the_others():
+    # Out of the fields of view of cam00 and cam01: the two others still confirm each other.
+    truth = ball_masks(CAMERAS, np.array([1.5, 0.0, 1.5]), 0.3)
+    assert not truth[0].any() and not truth[1].any() and truth[2].any() and truth[3].any()
+    kept = consistent_silhouettes(CAMERAS, truth)
+    for got, want in zip(kept[2:], truth[2:], strict=True):
+        assert (got & want).sum() >= 0.99 * want.sum()
+    # One view's segmentation failed (empty): it takes no part, the others stay.
+    masks = ball_masks(CAMERAS, CENTRE, 0.3)
+    masks[2] = np.zeros_like(masks[2])
+    kept = consistent_silhouettes(CAMERAS, masks)
+    assert not kept[2].any()
+    for k in (0, 1, 3):
+        assert (kept[k] & masks[k]).sum() >= 0.99 * masks[k].sum()
+
+
+def test_bad_check_settings_are_one_line_errors():
+    for kwargs, match in (({"check_tolerance": 0.6}, "check-tolerance"),
+                          ({"check_voxel_m": 0.0}, "check-voxel-m"),
+                          ({"check_size_m": 0.05}, "exceed two voxels"),
+                          ({"check_size_m": 100.0, "check_voxel_m": 0.01}, "million voxels")):
+        with pytest.raises(UserError, match=match):
+            HullCheckConfig(**kwargs)
