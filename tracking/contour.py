@@ -68,8 +68,10 @@ class _ViewTarget:
     """What one view's image silhouette offers: its signed distance field (pixels, positive
     outside), the field's gradient, and the points of its outer outline."""
 
-    def __init__(self, camera: Camera, mask: np.ndarray, config: ContourConfig) -> None:
+    def __init__(self, camera: Camera, mask: np.ndarray, config: ContourConfig,
+                 known: np.ndarray | None = None) -> None:  # fmt: skip
         self.camera = camera
+        self.known = known  # pixels whose label counts (None: all)
         mask = np.asarray(mask, dtype=np.uint8)
         contours, hierarchy = cv2.findContours(mask, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
         filled = mask.copy()
@@ -92,6 +94,10 @@ class _ViewTarget:
         self.grad_v = cv2.Sobel(sdf, cv2.CV_32F, 0, 1, ksize=3) / 8.0
         points = (np.concatenate(outer)[:: max(config.outline_step_px, 1)].astype(float) + 0.5
                   if outer else np.zeros((0, 2)))  # fmt: skip
+        if known is not None and len(points):
+            # An outline along unknown pixels is where the view could not tell, not an edge.
+            pixel = np.floor(points).astype(int)
+            points = points[known[pixel[:, 1], pixel[:, 0]]]
         self.outline = points  # (N, 2) pixel coordinates (centres at +0.5)
 
     def sample(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -187,6 +193,8 @@ def _outline_system(posed: _Posed, cameras: Sequence[Camera], targets: Sequence[
             for dc in (-1, 0, 1):
                 near_bg |= ~model_mask[r + dr, c + dc]
         idx = idx[near_bg]
+        if target.known is not None:
+            idx = idx[target.known[row[idx].astype(int), col[idx].astype(int)]]
         if len(idx) == 0:
             continue
         duv = np.einsum("nij,njk->nik", _projection_derivative(cam, posed.verts[idx]),
@@ -242,10 +250,12 @@ class _FrameOutlines:
     """One frame's image outlines at one pyramid level."""
 
     def __init__(self, cameras: Sequence[Camera], masks: Sequence[np.ndarray],
-                 config: ContourConfig) -> None:  # fmt: skip
+                 config: ContourConfig, known: Sequence[np.ndarray | None] | None = None,
+                 ) -> None:  # fmt: skip
         self.cameras = list(cameras)
-        self.targets = [_ViewTarget(c, m, config) for c, m in
-                        zip(self.cameras, masks, strict=True)]  # fmt: skip
+        known = list(known) if known is not None else [None] * len(self.cameras)
+        self.targets = [_ViewTarget(c, m, config, k) for c, m, k in
+                        zip(self.cameras, masks, known, strict=True)]  # fmt: skip
 
     def system(self, model: BodyModel, x: np.ndarray, free: np.ndarray, renderer: object,
                config: ContourConfig,
@@ -259,13 +269,14 @@ class _FrameOutlines:
 
 class ContourRefiner:
     """Refines poses of `model` against one frame's silhouettes (`masks`, one per camera, the
-    cameras of the pyramid level to use)."""
+    cameras of the pyramid level to use; `known`: per view, None or the pixels that count)."""
 
     def __init__(self, model: BodyModel, cameras: Sequence[Camera], masks: Sequence[np.ndarray],
-                 renderer: object, config: ContourConfig | None = None) -> None:  # fmt: skip
+                 renderer: object, config: ContourConfig | None = None,
+                 known: Sequence[np.ndarray | None] | None = None) -> None:  # fmt: skip
         self.model, self.renderer = model, renderer
         self.config = config or ContourConfig()
-        self.frame = _FrameOutlines(cameras, masks, self.config)
+        self.frame = _FrameOutlines(cameras, masks, self.config, known)
 
     def refine(self, x: np.ndarray, free: Sequence[int], energy: Callable[[np.ndarray], float],
                prior: tuple[np.ndarray, np.ndarray] | None = None,
@@ -305,19 +316,21 @@ class ContourRefiner:
 
 
 def refine_shape(base: BodyShape, scales: np.ndarray, frames: Sequence[tuple[Sequence[Camera],
-                 Sequence[np.ndarray]]], poses: Sequence[np.ndarray], renderer: object,
+                 Sequence[np.ndarray], Sequence[np.ndarray | None]]],
+                 poses: Sequence[np.ndarray], renderer: object,
                  energy: Callable[[BodyModel, Sequence[np.ndarray]], float],
                  config: ContourConfig | None = None, bounds: tuple[float, float] = (0.6, 1.5),
                  ) -> tuple[np.ndarray, list[np.ndarray], float]:  # fmt: skip
     """The shape scales (`tracking.body.SHAPE_GROUPS` of `base`) and the poses of several
-    frames together against their outlines; frames: (cameras, masks) per frame.
+    frames together against their outlines; frames: (cameras, masks, known) per frame (known:
+    per view, None or the pixels that count).
 
     energy(model, poses): the XOR energy summed over the frames, which every accepted step
     lowers. Shape derivatives are forward differences of the vertices. Returns the scales,
     the poses and their energy.
     """
     cfg = config or ContourConfig()
-    outlines = [_FrameOutlines(c, m, cfg) for c, m in frames]
+    outlines = [_FrameOutlines(c, m, cfg, k) for c, m, k in frames]
     scales = np.asarray(scales, float).copy()
     poses = [np.clip(np.asarray(x, float), LOWER_LIMITS, UPPER_LIMITS) for x in poses]
     n_shape, n_pose = len(scales), len(LOWER_LIMITS)

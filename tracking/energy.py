@@ -14,7 +14,10 @@ versions of the video frames by means of an image pyramid", hence the levels her
 * the model is rendered directly at each level's camera (pixel-centre rule of
   :mod:`tracking.render`);
 * the XOR count of level l is multiplied by the area ratio of the level (4**l when the image
-  size divides by 2**l), i.e. expressed in full-resolution pixels, so levels are comparable.
+  size divides by 2**l), i.e. expressed in full-resolution pixels, so levels are comparable;
+* pixels of a view whose label is unknown (``known`` False: the background behind them could
+  not be estimated, `tracking.silhouettes_step`) count in no XOR, at any level (a coarse pixel
+  is known when at least half of it is).
 
 At level 0 the energy of the pose that produced the masks (with the same renderer) is exactly
 0; at coarser levels a residual of a fraction of a coarse pixel per unit of outline remains,
@@ -51,16 +54,28 @@ def downsample_mask(mask: np.ndarray, width: int, height: int) -> np.ndarray:
     return coverage >= 0.5
 
 
+def counted(xor: np.ndarray, known: np.ndarray | None) -> np.ndarray:
+    """`xor` where the pixels count: all of it when `known` is None."""
+    return xor if known is None else xor & known
+
+
+def known_iou(a: np.ndarray, b: np.ndarray, known: np.ndarray | None) -> float:
+    """`iou` of two masks over the pixels where `known` (all when None)."""
+    return iou(a, b) if known is None else iou(a & known, b & known)
+
+
 class SilhouetteEnergy:
     """XOR energy of a body pose against foreground masks seen by calibrated cameras.
 
-    masks[i] is the (H, W) bool foreground of cameras[i] (same size). ``renderer`` is a
+    masks[i] is the (H, W) bool foreground of cameras[i] (same size); known[i], when given and
+    not None, the (H, W) bool pixels of that view that count (module docstring). ``renderer`` is a
     :class:`plugins.protocols.SilhouetteRenderer` instance or the name of one
     (``"cpu-raster"``, ...). ``evaluations`` counts calls of the energy itself.
     """
 
     def __init__(self, model: BodyModel, cameras: Sequence[Camera],
-                 masks: Sequence[np.ndarray], renderer: Any, levels: int = 3) -> None:
+                 masks: Sequence[np.ndarray], renderer: Any, levels: int = 3,
+                 known: Sequence[np.ndarray | None] | None = None) -> None:  # fmt: skip
         if len(cameras) != len(masks) or not cameras:
             raise ValueError(f"need one mask per camera, got {len(cameras)} cameras and "
                              f"{len(masks)} masks")
@@ -78,6 +93,9 @@ class SilhouetteEnergy:
         """cameras[level][view]."""
         self.masks: list[list[np.ndarray]] = []
         """masks[level][view]: (h, w) bool image silhouettes of that level."""
+        self.known: list[list[np.ndarray | None]] = []
+        """known[level][view]: (h, w) bool pixels that count, or None for all of them."""
+        known = list(known) if known is not None else [None] * len(cameras)
         self._pixel_area: list[np.ndarray] = []  # full-resolution pixels per pixel, per view
         full = []
         for camera, mask in zip(cameras, masks, strict=True):
@@ -94,6 +112,9 @@ class SilhouetteEnergy:
             self.cameras.append(level_cameras)
             self.masks.append([m if level == 0 else downsample_mask(m, c.width, c.height)
                                for m, c in zip(full, level_cameras, strict=True)])
+            self.known.append([None if k is None else np.asarray(k, bool) if level == 0
+                               else downsample_mask(k, c.width, c.height)
+                               for k, c in zip(known, level_cameras, strict=True)])
             self._pixel_area.append(np.array([
                 (c0.width * c0.height) / (c.width * c.height)
                 for c0, c in zip(cameras, level_cameras, strict=True)]))
@@ -117,9 +138,10 @@ class SilhouetteEnergy:
         return render_views(self.renderer, vertices, self.model.faces, self.cameras[level])
 
     def xor_masks(self, pose: Pose, level: int = 0) -> list[np.ndarray]:
-        """Per view, the (h, w) bool XOR of model and image silhouettes (for display)."""
-        return [m ^ image for m, image in
-                zip(self.model_masks(pose, level), self.masks[level], strict=True)]
+        """Per view, the (h, w) bool XOR of model and image silhouettes over the known pixels."""
+        return [counted(m ^ image, known) for m, image, known in
+                zip(self.model_masks(pose, level), self.masks[level], self.known[level],
+                    strict=True)]  # fmt: skip
 
     def per_view(self, pose: Pose, level: int = 0) -> np.ndarray:
         """(views,) XOR pixel counts at ``level``, in full-resolution pixels."""

@@ -199,14 +199,23 @@ to ~10 px or more in HD video); the mask is ANDed at full size."""
 
 def consistent_silhouettes(cameras: Sequence[Camera], masks: Sequence[np.ndarray],
                            config: HullCheckConfig | None = None,
-                           boxes: Sequence[Box | None] | None = None) -> list[np.ndarray]:
+                           boxes: Sequence[Box | None] | None = None,
+                           unknown: Sequence[np.ndarray | None] | None = None,
+                           ) -> list[np.ndarray]:  # fmt: skip
     """Each (H, W) bool mask reduced to the pixels under the projection of the views' common
     visual hull (module docstring). Masks come back unchanged when fewer than two views have a
-    silhouette, and empty when the views have no 3D point in common."""
+    silhouette, and empty when the views have no 3D point in common.
+
+    ``unknown``: per view, None or (H, W) bool pixels whose label the view cannot tell (its
+    background there is unknown): they do not carve the hull.
+    """
     config = config or HullCheckConfig()
     masks = [np.asarray(m, bool) for m in masks]
     if not config.multi_view_check or sum(bool(m.any()) for m in masks) < 2:
         return masks
+    carving = masks
+    if unknown is not None:
+        carving = [m if u is None else m | u for m, u in zip(masks, unknown, strict=True)]
     points, _ = voxel_centres(rays_meeting_point(cameras, masks), config.check_size_m,
                               config.check_voxel_m)
     size = max(max(m.shape) for m in masks)
@@ -214,7 +223,7 @@ def consistent_silhouettes(cameras: Sequence[Camera], masks: Sequence[np.ndarray
     # Seen by all views but one: a subject partly out of one camera's field stays; a blob
     # whose rays only one other camera sees (behind the subject, below the floor) does not.
     views = sum(bool(m.any()) for m in masks)
-    kept, projections = carve(cameras, masks, points, dilate_px=dilate, boxes=boxes,
+    kept, projections = carve(cameras, carving, points, dilate_px=dilate, boxes=boxes,
                               min_views=max(2, views - 1))
     out = []
     for cam, mask, proj in zip(cameras, masks, projections, strict=True):

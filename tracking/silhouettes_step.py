@@ -4,6 +4,8 @@ Reads a video workspace (`tracking.video`) and writes::
 
     WS/silhouettes/<camera>/<frame:06d>.png   uint8 masks, 255 foreground / 0 background,
                                               frame index 0-based, one per processed frame
+    WS/silhouettes/<camera>/unknown.png       pixels whose background is unknown (255), with
+                                              --background-images only, when there are any
     WS/logs/silhouettes.rrd                   cameras, sample frames with their masks,
                                               backgrounds, foreground fraction over frames
     WS/run.json                               step ``silhouettes``: config and summary
@@ -60,6 +62,9 @@ from tracking.video import STEP as INIT_STEP
 from tracking.video import content_box, read_frames, video_info, video_path, workspace_cameras
 
 STEP = "silhouettes"
+UNKNOWN_NAME = "unknown.png"
+"""``silhouettes/<camera>/unknown.png``: the camera's pixels whose background is unknown (255),
+left out of the tracking energy and of the silhouette IoU; written only when there are any."""
 _MAD_TO_STD = 1.4826  # as BackgroundModel.from_sequence
 _BACKGROUND_FORMAT = re.compile(r"^(median|frames:(\d+)-(\d+))$")
 
@@ -210,11 +215,12 @@ the Pose2Sim demo's photos agree on 79-93%)."""
 
 def with_background_photo(model: BackgroundModel, frames: list[np.ndarray], photo: np.ndarray,
                           thresholds: SilhouetteConfig | None = None,
-                          ) -> tuple[BackgroundModel, dict[str, Any]]:  # fmt: skip
+                          ) -> tuple[BackgroundModel, np.ndarray, dict[str, Any]]:  # fmt: skip
     """The median background `model` of `frames` with a photo of the empty scene (H, W, 3)
-    uint8 put in where the subject moved, and what was done (``area``: fraction of the image
-    taken from the photo; ``agreement``: fraction of the rest where the photo matches the
-    median; ``gain``: per-channel factor applied to the photo).
+    uint8 put in where the subject moved; the pixels whose background is unknown (H, W) bool;
+    and what was done (``area``: fraction of the image taken from the photo; ``unknown``:
+    fraction unknown; ``agreement``: fraction of the rest where the photo matches the median;
+    ``gain``: per-channel factor applied to the photo).
 
     Where the subject stands in most frames the median *is* the subject (a person balancing on
     one spot: the torso and shorts). Where it moved is known: the union of its silhouettes
@@ -222,8 +228,13 @@ def with_background_photo(model: BackgroundModel, frames: list[np.ndarray], phot
     with its holes filled (what the subject always covers is enclosed by where it moved). There
     the photo, brought to the video's exposure by a per-channel gain measured where both
     agree, is the background, with no spread of its own (the classification's ``min_std``
-    floor). A photo shot at another time may show people or objects the video does not: the
-    multi-view check (`tracking.hull`) removes such one-camera blobs from the silhouettes.
+    floor), wherever the video confirms it: the photo is background in one of the frames at
+    least, or the pixel belongs to a patch of unconfirmed pixels enclosed by confirmed ones
+    (what the subject never uncovers). A photo shot at another time may show people or
+    objects the video does not: such a patch borders pixels where the photo always matches,
+    and there the median stays, but where the subject moved neither is to be trusted: there
+    the background is *unknown* (`UNKNOWN_NAME`): the multi-view check does not carve with
+    those pixels, and the tracker leaves them out of its energy.
     """
     thresholds = thresholds or SilhouetteConfig()
     if photo.shape != model.shape:
@@ -241,14 +252,52 @@ def with_background_photo(model: BackgroundModel, frames: list[np.ndarray], phot
     agree = (np.abs(picture - model.mean) < thresholds.lower_sigma * std).all(axis=2) & ~region
     agreement = float(agree.sum() / max(1, (~region).sum()))
     if agreement < _MIN_PHOTO_AGREEMENT:
-        return model, {"area": 0.0, "agreement": agreement, "gain": None}
+        return model, np.zeros((h, w), bool), {"area": 0.0, "unknown": 0.0,
+                                               "agreement": agreement, "gain": None}
     gain = [float(np.median(model.mean[..., c][agree] / np.maximum(picture[..., c][agree], 1.0)))
             for c in range(picture.shape[2])]  # fmt: skip
     picture *= np.asarray(gain, np.float32)
-    inside = region[..., None]
+    # How often each pixel shows the photo's background (within the lower threshold).
+    shown = np.zeros((h, w), np.float32)
+    tolerance = thresholds.lower_sigma * thresholds.min_std
+    for frame in frames:
+        shown += (np.abs(frame.astype(np.float32) - picture) < tolerance).all(axis=2)
+    shown /= len(frames)
+    use = region & (shown > 0)
+    use |= region & _enclosed(shown == 0, shown, round(0.01 * size), within=region)
+    unknown = region & ~use
+    inside = use[..., None]
     combined = BackgroundModel(np.where(inside, picture, model.mean),
                                np.where(inside, np.float32(0), model.std))
-    return combined, {"area": float(region.mean()), "agreement": agreement, "gain": gain}
+    return combined, unknown, {"area": float(use.mean()), "unknown": float(unknown.mean()),
+                               "agreement": agreement, "gain": gain}
+
+
+_ENCLOSED_MAX_STATIC = 0.15
+"""A patch of pixels where the photo is never background counts as the subject's hidden core
+when at most this fraction of its rim shows the photo's background nearly always (90% of the
+frames); foreign objects in the Pose2Sim photos have 22-34% of their rim static."""
+
+
+def _enclosed(unconfirmed: np.ndarray, shown: np.ndarray, rim_px: int, within: np.ndarray
+              ) -> np.ndarray:  # fmt: skip
+    """The patches of `unconfirmed` (H, W) bool that meet `within` and whose rim (`rim_px`
+    wide) is at most `_ENCLOSED_MAX_STATIC` static (the photo shown in 90% of the frames or
+    more)."""
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(unconfirmed.astype(np.uint8),
+                                                               connectivity=8)
+    keep = np.zeros(count, bool)
+    disc = _disc(2 * rim_px + 1)
+    for k in np.unique(labels[within & unconfirmed]):
+        x, y, cw, ch = stats[k, :4]
+        x0, y0 = max(0, x - rim_px - 1), max(0, y - rim_px - 1)
+        x1 = min(unconfirmed.shape[1], x + cw + rim_px + 1)
+        y1 = min(unconfirmed.shape[0], y + ch + rim_px + 1)
+        patch = (labels[y0:y1, x0:x1] == k).astype(np.uint8)
+        rim = cv2.dilate(patch, disc).astype(bool) & ~patch.astype(bool)
+        if rim.any():
+            keep[k] = (shown[y0:y1, x0:x1][rim] >= 0.9).mean() <= _ENCLOSED_MAX_STATIC
+    return keep[labels]
 
 
 def _disc(diameter: int) -> np.ndarray:
@@ -429,6 +478,8 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
                 root=ws.root.resolve(), cameras=cameras, outs=[job.out for job in jobs],
                 frames=frames, config=config.hull), done, progress)
         for camera, result in zip(cameras, done, strict=True):
+            if result.background.unknown is not None:
+                _write_mask(tmp / camera.name / UNKNOWN_NAME, result.background.unknown)
             _log_camera(rec, ws, camera, result, tmp / camera.name, sorted(logged), frames,
                         fps[camera.name])
             fractions, empty, border = (result.masks.fractions, result.masks.empty,
@@ -600,6 +651,8 @@ class _Background:
     model: BackgroundModel
     photo: dict[str, Any] | None
     """:func:`with_background_photo`'s account, with the image's name; None without a photo."""
+    unknown: np.ndarray | None = None
+    """(H, W) bool: pixels whose background is unknown (:func:`with_background_photo`)."""
 
 
 @dataclass(frozen=True)
@@ -665,8 +718,9 @@ def camera_background(job: _CameraJob) -> _Background:
     if job.background_image is None:
         return _Background(model, None)
     photo = read_background_image(job.background_image, job.camera)
-    model, account = with_background_photo(model, frames, photo, job.thresholds)
-    return _Background(model, {"image": job.background_image.name, **account})
+    model, unknown, account = with_background_photo(model, frames, photo, job.thresholds)
+    return _Background(model, {"image": job.background_image.name, **account},
+                       unknown if unknown.any() else None)
 
 
 def frame_silhouettes(job: _FramesJob, models: Sequence[BackgroundModel], progress: Any = None
@@ -686,11 +740,12 @@ def frame_silhouettes(job: _FramesJob, models: Sequence[BackgroundModel], progre
     return result
 
 
-def frames_consistency(job: _HullJob, progress: Any = None
-                       ) -> tuple[list[_FramesResult], list[list[float]]]:  # fmt: skip
+def frames_consistency(job: _HullJob, unknowns: Sequence[np.ndarray | None],
+                       progress: Any = None) -> tuple[list[_FramesResult], list[list[float]]]:
     """The multi-view check (`tracking.hull`) of ``job.frames``: every camera's mask read from
-    its folder and rewritten when the check removed part of it: one independent task. Per
-    camera, the statistics of the final masks and the fraction removed per frame."""
+    its folder and rewritten when the check changed it (`unknowns`: each camera's pixels of
+    unknown background, which do not carve): one independent task. Per camera, the
+    statistics of the final masks and the fraction of the silhouette removed per frame."""
     ws = Workspace(job.root)
     boxes = [content_box(ws, camera) for camera in job.cameras]
     results = [_FramesResult([], [], []) for _ in job.cameras]
@@ -698,12 +753,12 @@ def frames_consistency(job: _HullJob, progress: Any = None
     for index in job.frames:
         paths = [out / f"{index:06d}.png" for out in job.outs]
         masks = [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) > 127 for p in paths]
-        kept = consistent_silhouettes(job.cameras, masks, job.config, boxes)
+        kept = consistent_silhouettes(job.cameras, masks, job.config, boxes, unknowns)
         for k, (path, mask, final) in enumerate(zip(paths, masks, kept, strict=True)):
             before = int(mask.sum())
-            if int(final.sum()) != before:
+            if not np.array_equal(final, mask):
                 _write_mask(path, final)
-            removed[k].append(1.0 - final.sum() / before if before else 0.0)
+            removed[k].append(float((mask & ~final).sum() / before) if before else 0.0)
             _stats(index, final, boxes[k], results[k])
         if progress is not None:
             progress.update()
@@ -732,11 +787,12 @@ def _checked_by_hull(map_fn: CameraMap | None, job: _HullJob, done: list[_Camera
                      progress: Any) -> list[_CameraResult]:  # fmt: skip
     """``done`` after the multi-view check of every processed frame: in this process, or as a
     task per run of frames (:func:`frame_chunks`) under `mocap batch`."""
+    unknowns = tuple(result.background.unknown for result in done)
     if map_fn is None:
-        parts = [frames_consistency(job, progress)]
+        parts = [frames_consistency(job, unknowns, progress)]
     else:
         parts = map_fn(frames_consistency, [dataclasses.replace(job, frames=run)
-                                            for run in frame_chunks(job.frames)])
+                                            for run in frame_chunks(job.frames)], unknowns)
         progress.update(len(job.frames))
     return [dataclasses.replace(
         result, masks=_FramesResult.joined([p[0][k] for p in parts]),
@@ -775,7 +831,8 @@ def summary_lines(ws: Workspace, record: StepRecord) -> list[str]:
             line += f"; the multi-view check removed {cam['hull_removed']['median']:.1%}"
         photo = cam.get("background_image")
         if photo is not None and photo["gain"] is not None:
-            line += f"; photo on {photo['area']:.1%} of the image"
+            line += (f"; photo on {photo['area']:.1%} of the image, background unknown on "
+                     f"{photo['unknown']:.1%}")
         lines.append(line)
     lines += [f"warning      {w}" for w in s["warnings"]]
     lines.append(f"recording    {ws.logs_dir / f'{STEP}.rrd'}")

@@ -18,6 +18,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import io
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,6 +33,7 @@ from tracking.body import BONES, NODE_NAMES, BodyModel, BodyShape, Pose
 from tracking.body import node_positions_in_world as _nodes
 from tracking.body_motion import read_pose_file
 from tracking.render import render_views
+from tracking.silhouettes_step import UNKNOWN_NAME
 from tracking.tracker import FrameResult, SilhouetteTracker, TrackConfig, TrackingLost
 
 
@@ -75,6 +77,16 @@ def silhouette_frames(ws: Workspace, names: list[str]) -> list[int]:
     return frames
 
 
+def unknown_pixels(ws: Workspace, cameras: Sequence[Any]) -> list[np.ndarray | None]:
+    """Per camera, its pixels of unknown background (``silhouettes/<camera>/unknown.png``,
+    `tracking.silhouettes_step`), or None when it has none."""
+    out: list[np.ndarray | None] = []
+    for camera in cameras:
+        path = ws.silhouettes_dir / camera.name / UNKNOWN_NAME
+        out.append(_read_mask(path, camera) if path.exists() else None)
+    return out
+
+
 def _read_mask(path: Path, camera: Any) -> np.ndarray:
     mask = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
     if mask is None:
@@ -113,7 +125,8 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
     if done := ws.reusable("track", fp, *outputs.values(), overwrite=overwrite):
         return {**done.summary, "up_to_date": True}
     frame_rate = frame_rate_of(ws)
-    tracker = SilhouetteTracker(cameras, config, shape=init_shape)
+    tracker = SilhouetteTracker(cameras, config, shape=init_shape,
+                                unknown=unknown_pixels(ws, cameras))
     results: list[FrameResult] = []
 
     def masks_of(frame: int) -> list[np.ndarray]:

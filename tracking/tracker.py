@@ -61,7 +61,7 @@ from tracking.body import (
 )
 from tracking.cameras import Camera
 from tracking.contour import ContourConfig, ContourRefiner, refine_shape
-from tracking.energy import SilhouetteEnergy
+from tracking.energy import SilhouetteEnergy, counted
 from tracking.hull import surface_voxels, visual_hull
 from tracking.render import render_views
 
@@ -238,6 +238,7 @@ class _StageEnergy:
         self.faces = model.faces[moving]
         self.cameras = energy.cameras[level]
         self.masks = energy.masks[level]
+        self.known = energy.known[level]
         static_faces = model.faces[~moving]
         vertices = model.posed_vertices(Pose(self.base))
         self.static = (
@@ -262,9 +263,9 @@ class _StageEnergy:
             centre, weight = self.prior
             x = self.params(values)
             total += float(np.sum(weight[self.free] * (x[self.free] - centre[self.free]) ** 2))
-        for static, part, mask, area in zip(self.static, moving, self.masks, self.pixel_area,
-                                            strict=True):  # fmt: skip
-            total += area * np.count_nonzero((static | part) ^ mask)
+        for static, part, mask, known, area in zip(self.static, moving, self.masks, self.known,
+                                                   self.pixel_area, strict=True):  # fmt: skip
+            total += area * np.count_nonzero(counted((static | part) ^ mask, known))
         return total
 
 
@@ -287,14 +288,19 @@ class SilhouetteTracker:
     """Tracks one subject through a sequence of multi-view silhouettes (see module docstring).
 
     cameras: the calibrated views; shape: the subject's scale parameters (fixed, thesis 6.2.4),
-    or None to estimate them at initialisation.
+    or None to estimate them at initialisation; unknown: per view, None or the (H, W) bool
+    pixels whose label the silhouettes cannot tell (no background known behind them): they
+    count in no energy, and do not carve the visual hull.
     """
 
     def __init__(self, cameras: Sequence[Camera], config: TrackConfig | None = None,
-                 shape: BodyShape | None = None) -> None:  # fmt: skip
+                 shape: BodyShape | None = None,
+                 unknown: Sequence[np.ndarray | None] | None = None) -> None:  # fmt: skip
         from plugins.registry import create
 
         self.cameras = list(cameras)
+        self.unknown = list(unknown) if unknown is not None else [None] * len(self.cameras)
+        self.known = [None if u is None else ~np.asarray(u, bool) for u in self.unknown]
         self.config = config or TrackConfig()
         self.renderer = create("renderer", self.config.renderer)
         self.shape = shape
@@ -311,7 +317,8 @@ class SilhouetteTracker:
         if not all(m.any() for m in masks):
             empty = [c.name for c, m in zip(self.cameras, masks, strict=True) if not m.any()]
             raise TrackingLost(f"empty silhouette in {', '.join(empty)}")
-        points, n, occupied = visual_hull(self.cameras, masks, size_m=self.config.hull_size_m,
+        carving = [m if u is None else m | u for m, u in zip(masks, self.unknown, strict=True)]
+        points, n, occupied = visual_hull(self.cameras, carving, size_m=self.config.hull_size_m,
                                           voxel_m=self.config.voxel_m)
         return points[surface_voxels(occupied, n)]
 
@@ -352,7 +359,8 @@ class SilhouetteTracker:
         level = self.config.search_level
         energy = self._energy(masks)
         refiner = ContourRefiner(energy.model, energy.cameras[level], energy.masks[level],
-                                 energy.renderer, ContourConfig(iterations=20))  # fmt: skip
+                                 energy.renderer, ContourConfig(iterations=20),
+                                 known=energy.known[level])  # fmt: skip
         best, best_e = x, np.inf
         for start in (x, swap_sides(x, "leg"), swap_sides(x, "arm"),
                       swap_sides(swap_sides(x, "leg"), "arm")):  # fmt: skip
@@ -380,7 +388,8 @@ class SilhouetteTracker:
 
         scales, xs, _ = refine_shape(
             base, np.ones(len(SHAPE_GROUPS)),
-            [(e.cameras[level], e.masks[level]) for e in energies], [p.params for p in poses],
+            [(e.cameras[level], e.masks[level], e.known[level]) for e in energies],
+            [p.params for p in poses],
             self.renderer, energy, ContourConfig(iterations=iterations))
         self.shape = scaled_shape(base, scales)
         self.model = BodyModel(self.shape)
@@ -416,7 +425,7 @@ class SilhouetteTracker:
     def _energy(self, masks: Sequence[np.ndarray]) -> SilhouetteEnergy:
         assert self.model is not None
         return SilhouetteEnergy(self.model, self.cameras, masks, self.renderer,
-                                levels=self.config.levels)  # fmt: skip
+                                levels=self.config.levels, known=self.known)  # fmt: skip
 
     def _prediction(self) -> tuple[np.ndarray, np.ndarray]:
         """Constant-velocity prediction and the per-parameter change of the last two frames."""
@@ -502,15 +511,17 @@ class SilhouetteTracker:
         import cv2
 
         cfg = self.config
+        # Where a view cannot tell (unknown pixels), a joint counts as inside its silhouette.
         self._dilated = [
             [cv2.dilate(m.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
-             for m in level_masks]
-            for level_masks in energy.masks
+             | (False if k is None else ~k) for m, k in zip(level_masks, level_known, strict=True)]
+            for level_masks, level_known in zip(energy.masks, energy.known, strict=True)
         ]  # fmt: skip
         coarse = min(cfg.levels - 1, cfg.search_level + 1)
         # Temporal prior (thesis: "prediction"): a deviation of one `prior_scale` from the
         # predicted pose costs `prior_weight` of the silhouette area, in XOR pixels.
-        area = float(sum(np.count_nonzero(m) for m in energy.masks[0]))
+        area = float(sum(np.count_nonzero(counted(m, k))
+                         for m, k in zip(energy.masks[0], energy.known[0], strict=True)))
         scale = np.where(np.arange(N_POSE_PARAMS) < 3, cfg.prior_scale_m,
                          np.deg2rad(cfg.prior_scale_deg))  # fmt: skip
         if init:
@@ -565,7 +576,8 @@ class SilhouetteTracker:
         if self._refiner is None or self._refiner[0] is not energy or self._refiner[1] != level:
             self._refiner = (energy, level, ContourRefiner(
                 energy.model, energy.cameras[level], energy.masks[level], energy.renderer,
-                ContourConfig(iterations=self.config.contour_iterations)))
+                ContourConfig(iterations=self.config.contour_iterations),
+                known=energy.known[level]))
         refiner = self._refiner[2]
         x, _, evaluations = refiner.refine(x, np.arange(N_POSE_PARAMS),
                                            lambda y: self._objective(energy, y, level))
@@ -577,7 +589,8 @@ class SilhouetteTracker:
         """Track one frame; masks: one (H, W) bool silhouette per camera."""
         start = time.perf_counter()
         self.evaluations = 0
-        area = float(sum(np.count_nonzero(m) for m in masks))
+        area = float(sum(np.count_nonzero(counted(np.asarray(m, bool), k))
+                         for m, k in zip(masks, self.known, strict=True)))
         empty = [c.name for c, m in zip(self.cameras, masks, strict=True) if not m.any()]
         if empty:
             self.history = []

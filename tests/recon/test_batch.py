@@ -279,10 +279,10 @@ def test_silhouettes_per_camera_and_frames_on_dask_equal_a_serial_run(cluster, t
     for result in (serial, report.results[0]):
         assert [(s.step, s.status) for s in result.steps] == [
             (BatchStep.SILHOUETTES, StepStatus.DONE)], result.line()
-    # The runs' results were merged in frame order, as the serial loop lists them; cam00's
-    # photo shows a block that the multi-view check removes.
+    # The runs' results were merged in frame order, as the serial loop lists them; a light
+    # flashing in cam00's video alone is removed by the multi-view check.
     summary = serial.steps[0].summary
-    assert summary["cameras"]["cam00"]["hull_removed"]["median"] > 0.05
+    assert summary["cameras"]["cam00"]["hull_removed"]["max"] > 0.1
     assert summary == report.results[0].steps[0].summary
 
     keys = [str(t["key"]) for t in stream.data]
@@ -296,7 +296,7 @@ def test_silhouettes_per_camera_and_frames_on_dask_equal_a_serial_run(cluster, t
 
     a, b = (Workspace(tmp_path / kind).silhouettes_dir for kind in ("serial", "dask"))
     names = sorted(p.relative_to(a) for p in a.rglob("*.png"))
-    assert len(names) == cameras * frames
+    assert len(names) == cameras * frames + 1  # and cam00/unknown.png (its photo's block)
     assert names == sorted(p.relative_to(b) for p in b.rglob("*.png"))
     assert all(cv2.imread(str(a / n), cv2.IMREAD_GRAYSCALE).any() for n in names)
     for name in names:

@@ -96,7 +96,7 @@ def test_shape_from_the_outlines_of_several_frames():
                    for m, x in zip(masks, xs, strict=True))  # fmt: skip
 
     scales, xs, _ = refine_shape(base, np.ones(len(SHAPE_GROUPS)),
-                                 [(CAMERAS, m) for m in masks], [p.params for p in poses],
+                                 [(CAMERAS, m, None) for m in masks], [p.params for p in poses],
                                  RENDER, energy, ContourConfig(iterations=30))  # fmt: skip
     got = scaled_shape(base, scales)
     for name in ("thigh", "forearm", "shoulder_half_width", "neck_to_head_top", "upper_arm"):

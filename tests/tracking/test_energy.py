@@ -124,3 +124,21 @@ def test_bad_inputs_are_refused(setup):
         SilhouetteEnergy(model, cameras, [m[:, :10] for m in masks], renderer)
     with pytest.raises(ValueError, match="below 8 px"):
         SilhouetteEnergy(model, cameras, masks, renderer, levels=8)
+
+
+def test_unknown_pixels_count_in_no_xor():
+    cameras = ring_cameras(2, 3.0, 1.2, (0.0, 0.9, 0.0), 160, 120, 170.0)
+    model = BodyModel(BodyShape.default(1.75))
+    pose = Pose.from_dict({"root_ty": 0.95})
+    masks = [np.zeros((120, 160), bool), np.zeros((120, 160), bool)]  # nothing seen
+    known = [np.ones((120, 160), bool), None]
+    known[0][:, 80:] = False  # the right half of view 0 cannot tell
+    full = SilhouetteEnergy(model, cameras, masks, "cpu-raster", levels=2)
+    part = SilhouetteEnergy(model, cameras, masks, "cpu-raster", levels=2, known=known)
+    drawn = full.model_masks(pose, 0)
+    # All XOR is the model itself; with view 0's right half unknown only its left half counts.
+    assert full.per_view(pose, 0)[0] == drawn[0].sum()
+    assert part.per_view(pose, 0)[0] == drawn[0][:, :80].sum() < drawn[0].sum()
+    assert part.per_view(pose, 0)[1] == full.per_view(pose, 0)[1]
+    assert part.known[1][0].shape == (60, 80) and part.known[1][1] is None
+    assert part(pose, 1) < full(pose, 1)

@@ -76,3 +76,23 @@ def test_bad_check_settings_are_one_line_errors():
                           ({"check_size_m": 100.0, "check_voxel_m": 0.01}, "million voxels")):
         with pytest.raises(UserError, match=match):
             HullCheckConfig(**kwargs)
+
+
+def test_pixels_of_unknown_background_do_not_carve():
+    # cam01 cannot tell its left half (say its background photo shows a person there): its
+    # silhouette misses the ball's part there. Told so, the check keeps the ball whole in the
+    # other views; not told, that half of cam01 carves away what the others see behind it.
+    truth = ball_masks(CAMERAS, CENTRE, 0.3)
+    masks = [m.copy() for m in truth]
+    rows, cols = np.nonzero(truth[1])
+    middle = int(np.median(cols))
+    masks[1][:, :middle] = False  # the ball's left half lost
+    unknown: list[np.ndarray | None] = [None] * len(CAMERAS)
+    unknown[1] = np.zeros_like(truth[1])
+    unknown[1][:, :middle] = True
+    told = consistent_silhouettes(CAMERAS, masks, unknown=unknown)
+    blind = consistent_silhouettes(CAMERAS, masks)
+    for k in (0, 2, 3):
+        assert (told[k] & truth[k]).sum() >= 0.99 * truth[k].sum()
+    assert min((blind[k] & truth[k]).sum() / truth[k].sum() for k in (0, 2, 3)) < 0.9
+    assert (told[1] == masks[1]).all()  # cam01's known half is confirmed by the others

@@ -168,8 +168,9 @@ def test_frame_range_and_empty_background_frames(blob_workspace, tmp_path: Path)
 
 def test_background_photos_recover_a_subject_who_stays_put(tmp_path: Path):
     """A ball wobbling about one spot is part of its video's median; each camera's photo of the
-    empty scene (5% darker, and in cam00's a blue block the video never shows) replaces the
-    median where it moved, and the multi-view check removes cam00's block."""
+    empty scene (5% darker) replaces the median where it moved, but not where the photo shows
+    what the video never does (a blue block in cam00's); the multi-view check removes the light
+    that flashes in cam00's video alone."""
     videos, calibration, photos, truth = make_ball_scene(tmp_path / "scene")
     ws = init_video(tmp_path / "ws", videos, calibration)
     before = digest(photos)
@@ -187,14 +188,19 @@ def test_background_photos_recover_a_subject_who_stays_put(tmp_path: Path):
     record = make_silhouettes(ws, SilhouettesConfig(background_images=photos))
     assert digest(photos) == before  # only read
     with_photos = scores(record)
-    assert min(with_photos[1:]) >= 0.92 and with_photos[0] >= 0.85, with_photos
+    # In cam00 the block's pixels have no background to trust (the photo shows the block,
+    # the median the ball): the multi-view check labels them, a little wider than the ball.
+    assert min(with_photos[1:]) >= 0.92 and with_photos[0] >= 0.88, with_photos
     for name, camera in record.summary["cameras"].items():
         photo = camera["background_image"]
         assert photo["image"] == f"{name}_ext.png" and 0.05 < photo["area"] < 0.3
+        assert (photo["unknown"] > 0.002) == (name == "cam00")  # the block
         assert photo["gain"] == pytest.approx([1 / 0.95] * 3, rel=0.02)  # the exposure
         assert photo["agreement"] > 0.9
     assert record.summary["cameras"]["cam01"]["hull_removed"]["max"] < 0.01
-    assert record.summary["cameras"]["cam00"]["hull_removed"]["median"] > 0.05  # the block
+    assert record.summary["cameras"]["cam00"]["hull_removed"]["max"] > 0.3  # the light
+    mask = read_mask(ws.silhouettes_dir / "cam00" / "000003.png")
+    assert not mask[HEIGHT - 25:HEIGHT - 5, 20:60].any()
     off = scores(make_silhouettes(ws, SilhouettesConfig(background_images=photos,
                                                         hull=NO_CHECK)))
     assert off[0] < with_photos[0] - 0.05 and off[1:] == pytest.approx(with_photos[1:])

@@ -129,3 +129,39 @@ def test_cli_track_rejects_bad_settings_in_one_line(tmp_path, flag):
     result = run_cli("track", tmp_path, *flag)
     assert result.returncode == 2 and "Traceback" not in result.stderr
     assert result.stderr.strip().count("\n") == 0 and flag[0] in result.stderr
+
+
+def test_pixels_of_unknown_background_are_left_out():
+    """cam01's background is unknown over a band across the torso (its photo showed a person
+    there, say): its silhouette there is wrong, the torso lost and a blob beside it. Told
+    which pixels are unknown, the tracker leaves them out of the energy (whose XOR is then
+    that of clean silhouettes) and of the visual hull."""
+    truth = _walk(3)
+    band = np.zeros((CAMERAS[1].height, CAMERAS[1].width), bool)
+    band[60:150, :] = True
+
+    def corrupted(pose: Pose) -> list[np.ndarray]:
+        masks = _masks(pose)
+        masks[1] = masks[1] & ~band  # the torso and arms lost ...
+        masks[1][70:140, 60:110] = True  # ... and a blob that is not there
+        return masks
+
+    errors, xor = {}, {}
+    for told in (True, False):
+        tracker = SilhouetteTracker(CAMERAS, TrackConfig(), shape=SHAPE,
+                                    unknown=[None, band, None, None] if told else None)
+        errors[told], xor[told] = [], []
+        for frame, pose in enumerate(truth):
+            result = tracker.track(frame, corrupted(pose),
+                                   init=truth[0] if frame == 0 else None)
+            assert result.pose is not None, result.event
+            errors[told].append(_mpjpe_mm(result.pose, SHAPE, pose))
+            xor[told].append(result.xor_fraction)
+    assert max(errors[True]) < 15, errors
+    assert max(xor[True]) < 0.06 < min(xor[False][1:]), xor
+    # The visual hull is carved by what the views can tell: the torso is in it.
+    tracker = SilhouetteTracker(CAMERAS, TrackConfig(), shape=SHAPE,
+                                unknown=[None, band, None, None])
+    hull = tracker.visual_hull_points(corrupted(truth[0]))
+    body = MODEL.posed_vertices(truth[0])
+    assert np.ptp(hull[:, 1]) > np.ptp(body[:, 1]) - 0.1

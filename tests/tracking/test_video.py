@@ -97,10 +97,11 @@ def make_ball_scene(folder: Path, cameras: int = 4, frames: int = FRAMES
                     ) -> tuple[Path, Path, Path, list[list[np.ndarray]]]:  # fmt: skip
     """A subject that stays put: an orange ball of 0.35 m wobbling by 0.15 m about the target
     of a ring of cameras (3 m away, 1.5 m up), so that its core is covered in every frame, as
-    the torso of a person balancing on one spot is. Writes the videos, their calibration and a
-    background photo per camera (``photos/cam0k_ext.png``: the empty scene 5% darker, and in
-    cam00's a foreign blue block next to the ball, which the video never shows). Returns
-    (videos dir, calibration, photos dir, truth masks per camera per frame)."""
+    the torso of a person balancing on one spot is. In cam00's video a light flashes on a wall
+    below the ball in every third frame (what one camera alone sees). Writes the videos, their
+    calibration and a background photo per camera (``photos/cam0k_ext.png``: the empty scene
+    5% darker, and in cam00's a foreign blue block next to the ball, which the video never
+    shows). Returns (videos dir, calibration, photos dir, truth masks per camera per frame)."""
     rigs = ring_cameras(cameras, 3.0, 1.5, width=WIDTH, height=HEIGHT, focal_px=220.0)
     videos, photos = folder / "videos", folder / "photos"
     videos.mkdir(parents=True)
@@ -115,8 +116,10 @@ def make_ball_scene(folder: Path, cameras: int = 4, frames: int = FRAMES
     for k in range(len(rigs)):
         background = background_image(seed=k)
         images = []
-        for mask in truth[k]:
+        for i, mask in enumerate(truth[k]):
             image = background.copy()
+            if k == 0 and i % 3 == 0:
+                image[HEIGHT - 25:HEIGHT - 5, 20:60] = 245
             image[mask] = (30, 140, 250)
             images.append(image)
         write_video(videos / f"cam{k:02d}.avi", images)
