@@ -522,8 +522,9 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
 
 def _log_camera(rec: Any, ws: Workspace, camera: Camera, result: _CameraResult, masks: Path,
                 logged: list[int], frames: list[int], fps: float) -> None:  # fmt: skip
-    """One camera's part of the recording: the camera, its background, the logged frames with
-    their final masks, and the foreground fraction over frames."""
+    """One camera's part of the recording: the camera, its background (and its pixels of
+    unknown background), the logged frames with their final masks, and the foreground
+    fraction over frames."""
     from recon import recording
 
     entity = f"world/cameras/{recording.entity_name(camera.name)}"
@@ -532,6 +533,9 @@ def _log_camera(rec: Any, ws: Workspace, camera: Camera, result: _CameraResult, 
                                cam_from_world=camera.cam_from_world)
     recording.log_frame_image(rec, f"backgrounds/{recording.entity_name(camera.name)}",
                               np.clip(result.background.model.mean, 0, 255).astype(np.uint8))
+    if result.background.unknown is not None:
+        recording.log_frame_image(rec, f"backgrounds/{recording.entity_name(camera.name)}"
+                                  "/unknown", result.background.unknown.astype(np.uint8) * 255)
     for index, frame in read_frames(ws, camera.name, logged):
         time_s = index / fps if fps else None
         mask = cv2.imread(str(masks / f"{index:06d}.png"), cv2.IMREAD_GRAYSCALE) > 127

@@ -188,15 +188,22 @@ def test_background_photos_recover_a_subject_who_stays_put(tmp_path: Path):
     record = make_silhouettes(ws, SilhouettesConfig(background_images=photos))
     assert digest(photos) == before  # only read
     with_photos = scores(record)
-    # In cam00 the block's pixels have no background to trust (the photo shows the block,
-    # the median the ball): the multi-view check labels them, a little wider than the ball.
+    # In cam00 the block's pixels next to the ball have no background to trust (the photo
+    # shows the block, the median the ball): unknown, and the mask there follows the median.
     assert min(with_photos[1:]) >= 0.92 and with_photos[0] >= 0.88, with_photos
     for name, camera in record.summary["cameras"].items():
         photo = camera["background_image"]
         assert photo["image"] == f"{name}_ext.png" and 0.05 < photo["area"] < 0.3
         assert (photo["unknown"] > 0.002) == (name == "cam00")  # the block
+        unknown = ws.silhouettes_dir / name / "unknown.png"
+        assert unknown.exists() == (name == "cam00")
         assert photo["gain"] == pytest.approx([1 / 0.95] * 3, rel=0.02)  # the exposure
         assert photo["agreement"] > 0.9
+    block = read_mask(ws.silhouettes_dir / "cam00" / "unknown.png")
+    assert block.mean() == pytest.approx(record.summary["cameras"]["cam00"]["background_image"][
+        "unknown"]) and block[HEIGHT // 2, WIDTH // 2 + 30]
+    assert any(e.startswith("/backgrounds/cam00/unknown")
+               for e in recording_entities(ws.logs_dir / "silhouettes.rrd"))
     assert record.summary["cameras"]["cam01"]["hull_removed"]["max"] < 0.01
     assert record.summary["cameras"]["cam00"]["hull_removed"]["max"] > 0.3  # the light
     mask = read_mask(ws.silhouettes_dir / "cam00" / "000003.png")
