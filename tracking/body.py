@@ -321,8 +321,10 @@ SHAPE_GROUPS: tuple[tuple[str, ...], ...] = (
     ("hip_half_width",),
     ("pelvis_half_width", "trunk_half_depth", "chest_half_width"),
     ("head_half_width",),
-    ("upper_arm_radius", "forearm_radius"),
-    ("thigh_radius", "shank_radius"),
+    ("upper_arm_radius",),
+    ("forearm_radius",),
+    ("thigh_radius",),
+    ("shank_radius",),
 )  # fmt: skip
 """Groups of BodyShape fields scaled together when the shape is estimated from silhouettes
 (`scaled_shape`): the lengths one by one, the girths by body part."""
