@@ -136,9 +136,11 @@ def _silhouettes_scaling(root: Path, frames: int) -> None:
         keys = [str(t["key"]) for t in stream.data]
         backgrounds = sum(k.startswith("camera_background-") for k in keys)
         runs = sum(k.startswith("frame_silhouettes-") for k in keys)
+        checks = sum(k.startswith("frames_consistency-") for k in keys)
         rate = cameras * frames / seconds[str(workers)]
         print(f"{workers} worker{'s' if workers > 1 else ' '} {seconds[str(workers)]:7.1f}  "
-              f"{rate:8.2f}          {backgrounds} background + {runs} frame runs")
+              f"{rate:8.2f}          {backgrounds} background + {runs} frame runs + "
+              f"{checks} multi-view check runs")
     masks = [Workspace(root / f"video-{kind}").silhouettes_dir for kind in kinds]
     names = sorted(p.relative_to(masks[0]) for p in masks[0].rglob("*.png"))
     same = len(names) == cameras * frames and all(
