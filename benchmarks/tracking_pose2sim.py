@@ -33,6 +33,7 @@ OUT = ROOT / "benchmarks" / "out"
 
 
 def main() -> None:
+    from recon.workspace import Workspace
     from tracking.body import BodyModel, BodyShape, Pose
     from tracking.cameras import read_cameras
     from tracking.energy import iou, known_iou
@@ -60,8 +61,6 @@ def main() -> None:
         render = CpuRasterRenderer(CpuRasterRenderer.Options())
         ious = {c.name: [] for c in cameras}
         plain = {c.name: [] for c in cameras}
-        from recon.workspace import Workspace
-
         unknown = dict(zip([c.name for c in cameras], unknown_pixels(Workspace(ws), cameras),
                            strict=True))
         for name, u in unknown.items():

@@ -65,6 +65,16 @@ def rays_meeting_point(cameras: Sequence[Camera], masks: Sequence[np.ndarray]) -
     return np.linalg.solve(a, b)
 
 
+def check_voxel_grid(size_m: float, voxel_m: float, size_flag: str, voxel_flag: str) -> None:
+    """One-line errors (naming the flags) for a cube of side `size_m` and voxels of `voxel_m`
+    (> 0) that :func:`voxel_centres` cannot make: under two voxels, over 64 million."""
+    if not size_m > 2 * voxel_m:
+        raise UserError(f"{size_flag} {size_m} must exceed two voxels ({voxel_flag} {voxel_m})")
+    if (size_m / voxel_m) ** 3 > 64e6:
+        raise UserError(f"{size_flag} {size_m} / {voxel_flag} {voxel_m}: more than 64 million "
+                        "voxels")
+
+
 def voxel_centres(centre: np.ndarray, size_m: float, voxel_m: float) -> tuple[np.ndarray, int]:
     """((n**3, 3) centres, n) of the cube of side ``size_m`` around ``centre``, ``voxel_m``
     apart, in C order over (x, y, z)."""
@@ -184,12 +194,8 @@ class HullCheckConfig:
             raise UserError(f"--check-tolerance must be in [0, 0.5), got {self.check_tolerance}")
         if not self.check_voxel_m > 0:
             raise UserError(f"--check-voxel-m must be > 0, got {self.check_voxel_m}")
-        if not self.check_size_m > 2 * self.check_voxel_m:
-            raise UserError(f"--check-size-m {self.check_size_m} must exceed two voxels "
-                            f"({2 * self.check_voxel_m} m)")
-        if (self.check_size_m / self.check_voxel_m) ** 3 > 64e6:
-            raise UserError(f"--check-size-m {self.check_size_m} / --check-voxel-m "
-                            f"{self.check_voxel_m}: more than 64 million voxels")
+        check_voxel_grid(self.check_size_m, self.check_voxel_m, "--check-size-m",
+                         "--check-voxel-m")
 
 
 _SPLAT_DOWNSCALE = 4
@@ -229,7 +235,7 @@ def consistent_silhouettes(cameras: Sequence[Camera], masks: Sequence[np.ndarray
     for cam, mask, proj in zip(cameras, masks, projections, strict=True):
         on = kept & proj.seen
         if not on.any() or not mask.any():
-            out.append(np.zeros_like(mask) if mask.any() else mask)
+            out.append(np.zeros_like(mask))
             continue
         # Voxel centres land about `footprint` pixels apart (the nearest voxels the farthest):
         # each is spread over half the diagonal of its cell, on an image reduced so that a

@@ -344,7 +344,8 @@ def _shadow_test(image: np.ndarray, mean: np.ndarray, std: np.ndarray, config: S
     return dimmed & (cos >= math.cos(math.radians(config.shadow_max_angle_deg)))
 
 
-def _disc(diameter: int) -> np.ndarray:
+def disc(diameter: int) -> np.ndarray:
+    """An elliptic structuring element `diameter` pixels across."""
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (diameter, diameter))
 
 
@@ -363,9 +364,9 @@ def foreground_mask(labels: np.ndarray, config: SilhouetteConfig | None = None) 
     k = config.scale(labels.shape)
     open_px, close_px = round(config.open_px * k), round(config.close_px * k)
     if open_px > 1:
-        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, _disc(open_px))
+        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, disc(open_px))
     if close_px > 1:
-        mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, _disc(close_px))
+        mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, disc(close_px))
     if config.max_hole_area > 0:
         mask = fill_holes(mask, round(config.max_hole_area * k * k))
     if config.min_area > 0:

@@ -55,6 +55,7 @@ from tracking.hull import HullCheckConfig, consistent_silhouettes
 from tracking.silhouette import (
     BackgroundModel,
     SilhouetteConfig,
+    disc,
     fill_holes,
     silhouette_from_frame,
 )
@@ -244,8 +245,8 @@ def with_background_photo(model: BackgroundModel, frames: list[np.ndarray], phot
     for frame in frames:
         moved |= silhouette_from_frame(frame, model, thresholds).astype(np.uint8)
     size = max(h, w)
-    region = cv2.morphologyEx(moved, cv2.MORPH_CLOSE, _disc(round(0.03 * size)))
-    region = cv2.dilate(region, _disc(round(0.01 * size)))
+    region = cv2.morphologyEx(moved, cv2.MORPH_CLOSE, disc(_odd(0.03 * size)))
+    region = cv2.dilate(region, disc(_odd(0.01 * size)))
     region = fill_holes(region, h * w).astype(bool)
     picture = photo.astype(np.float32)
     std = np.maximum(model.std, np.float32(thresholds.min_std))
@@ -287,22 +288,22 @@ def _enclosed(unconfirmed: np.ndarray, shown: np.ndarray, rim_px: int, within: n
     count, labels, stats, _ = cv2.connectedComponentsWithStats(unconfirmed.astype(np.uint8),
                                                                connectivity=8)
     keep = np.zeros(count, bool)
-    disc = _disc(2 * rim_px + 1)
+    ring = disc(_odd(2 * rim_px + 1))
     for k in np.unique(labels[within & unconfirmed]):
         x, y, cw, ch = stats[k, :4]
         x0, y0 = max(0, x - rim_px - 1), max(0, y - rim_px - 1)
         x1 = min(unconfirmed.shape[1], x + cw + rim_px + 1)
         y1 = min(unconfirmed.shape[0], y + ch + rim_px + 1)
         patch = (labels[y0:y1, x0:x1] == k).astype(np.uint8)
-        rim = cv2.dilate(patch, disc).astype(bool) & ~patch.astype(bool)
+        rim = cv2.dilate(patch, ring).astype(bool) & ~patch.astype(bool)
         if rim.any():
             keep[k] = (shown[y0:y1, x0:x1][rim] >= 0.9).mean() <= _ENCLOSED_MAX_STATIC
     return keep[labels]
 
 
-def _disc(diameter: int) -> np.ndarray:
-    d = max(3, diameter | 1)
-    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (d, d))
+def _odd(length: float) -> int:
+    """An odd structuring-element diameter of at least 3 pixels near `length`."""
+    return max(3, round(length) | 1)
 
 
 def background_images(folder: Path, cameras: Sequence[Camera]) -> dict[str, Path]:

@@ -62,7 +62,7 @@ from tracking.body import (
 from tracking.cameras import Camera
 from tracking.contour import ContourConfig, ContourRefiner, refine_shape
 from tracking.energy import SilhouetteEnergy, counted
-from tracking.hull import surface_voxels, visual_hull
+from tracking.hull import check_voxel_grid, surface_voxels, visual_hull
 from tracking.render import render_views
 
 _ROOT = [PARAM_INDEX[n] for n in ("root_tx", "root_ty", "root_tz", "root_rz", "root_rx",
@@ -198,9 +198,7 @@ class TrackConfig:
         if not 0 <= self.min_range_deg <= self.max_range_deg:
             raise UserError(f"need 0 <= --min-range-deg <= --max-range-deg, got "
                             f"{self.min_range_deg} and {self.max_range_deg}")
-        if self.hull_size_m <= 2 * self.voxel_m:
-            raise UserError(f"--hull-size-m {self.hull_size_m} must exceed two voxels "
-                            f"(--voxel-m {self.voxel_m})")
+        check_voxel_grid(self.hull_size_m, self.voxel_m, "--hull-size-m", "--voxel-m")
 
 
 @dataclass(frozen=True)
@@ -512,16 +510,16 @@ class SilhouetteTracker:
 
         cfg = self.config
         # Where a view cannot tell (unknown pixels), a joint counts as inside its silhouette.
-        self._dilated = [
-            [cv2.dilate(m.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
-             | (False if k is None else ~k) for m, k in zip(level_masks, level_known, strict=True)]
-            for level_masks, level_known in zip(energy.masks, energy.known, strict=True)
-        ]  # fmt: skip
+        def inside(mask: np.ndarray, known: np.ndarray | None) -> np.ndarray:
+            grown = cv2.dilate(mask.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+            return grown if known is None else grown | ~known
+
+        self._dilated = [[inside(m, k) for m, k in zip(masks, known, strict=True)]
+                         for masks, known in zip(energy.masks, energy.known, strict=True)]
         coarse = min(cfg.levels - 1, cfg.search_level + 1)
         # Temporal prior (thesis: "prediction"): a deviation of one `prior_scale` from the
         # predicted pose costs `prior_weight` of the silhouette area, in XOR pixels.
-        area = float(sum(np.count_nonzero(counted(m, k))
-                         for m, k in zip(energy.masks[0], energy.known[0], strict=True)))
+        area = _known_area(energy.masks[0], energy.known[0])
         scale = np.where(np.arange(N_POSE_PARAMS) < 3, cfg.prior_scale_m,
                          np.deg2rad(cfg.prior_scale_deg))  # fmt: skip
         if init:
@@ -589,8 +587,7 @@ class SilhouetteTracker:
         """Track one frame; masks: one (H, W) bool silhouette per camera."""
         start = time.perf_counter()
         self.evaluations = 0
-        area = float(sum(np.count_nonzero(counted(np.asarray(m, bool), k))
-                         for m, k in zip(masks, self.known, strict=True)))
+        area = _known_area([np.asarray(m, bool) for m in masks], self.known)
         empty = [c.name for c, m in zip(self.cameras, masks, strict=True) if not m.any()]
         if empty:
             self.history = []
@@ -637,6 +634,11 @@ class SilhouetteTracker:
         self.history = [*self.history[-1:], x]
         return FrameResult(frame, Pose(x), e, area, self.evaluations,
                            time.perf_counter() - start, event)  # fmt: skip
+
+
+def _known_area(masks: Sequence[np.ndarray], known: Sequence[np.ndarray | None]) -> float:
+    """Silhouette pixels over all views, counting only the known ones."""
+    return float(sum(np.count_nonzero(counted(m, k)) for m, k in zip(masks, known, strict=True)))
 
 
 def swap_sides(x: np.ndarray, limb: str) -> np.ndarray:
