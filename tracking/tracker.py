@@ -529,7 +529,10 @@ class SilhouetteTracker:
         # A limb's axial twist barely changes its silhouette (limbs are nearly round), so
         # without a pull it drifts and other joints compensate: pull twists weakly to 0.
         twist = cfg.twist_weight * area / np.deg2rad(cfg.twist_scale_deg) ** 2
-        centre[_TWISTS] = weight[_TWISTS] * centre[_TWISTS] / (weight[_TWISTS] + twist)
+        total = weight[_TWISTS] + twist
+        # Without the temporal prior and with --twist-weight 0 nothing pulls: no 0/0.
+        centre[_TWISTS] = np.divide(weight[_TWISTS] * centre[_TWISTS], total,
+                                    out=centre[_TWISTS].copy(), where=total > 0)
         weight[_TWISTS] = weight[_TWISTS] + twist
         self._prior = (centre, weight)
         if init or change is None:
