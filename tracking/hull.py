@@ -237,20 +237,46 @@ def consistent_silhouettes(cameras: Sequence[Camera], masks: Sequence[np.ndarray
         if not on.any() or not mask.any():
             out.append(np.zeros_like(mask))
             continue
-        # Voxel centres land about `footprint` pixels apart (the nearest voxels the farthest):
-        # each is spread over half the diagonal of its cell, on an image reduced so that a
-        # cell is still 3 pixels or more.
-        footprint = config.check_voxel_m * cam.K[0, 0] / np.percentile(proj.depth[on], 5)
-        ds = int(np.clip(footprint // 3, 1, _SPLAT_DOWNSCALE))
-        radius = max(1, int(np.ceil(0.71 * footprint / ds)))
-        h, w = mask.shape
-        small = np.zeros(((h + ds - 1) // ds, (w + ds - 1) // ds), np.uint8)
-        small[proj.row[on] // ds, proj.col[on] // ds] = 1
-        disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
-        small = cv2.dilate(small, disc)
-        under = small if ds == 1 else cv2.resize(small, (small.shape[1] * ds,
-                                                         small.shape[0] * ds),
-                                                 interpolation=cv2.INTER_NEAREST)
-        under = under[:h, :w].astype(bool)
-        out.append(mask & under)
+        out.append(mask & splat(cam, proj, on, config.check_voxel_m))
     return out
+
+
+def splat(camera: Camera, proj: Projection, on: np.ndarray, voxel_m: float,
+          tight: bool = False) -> np.ndarray:  # fmt: skip
+    """(H, W) bool: the pixels covered by the voxels ``on`` (of side ``voxel_m``) that ``proj``
+    projects into ``camera``; by default a little more (half a voxel's diagonal around each
+    centre), ``tight``: half a voxel, the gaps between centres closed."""
+    # Voxel centres land about `footprint` pixels apart (the nearest voxels the farthest): each
+    # is spread over half the diagonal of its cell (or half the cell, then closed), on an image
+    # reduced so that a cell is still 3 pixels or more.
+    h, w = camera.height, camera.width
+    if not on.any():
+        return np.zeros((h, w), bool)
+    footprint = voxel_m * camera.K[0, 0] / np.percentile(proj.depth[on], 5)
+    ds = int(np.clip(footprint // 3, 1, _SPLAT_DOWNSCALE))
+    radius = max(1, int(np.ceil((0.5 if tight else 0.71) * footprint / ds)))
+    small = np.zeros(((h + ds - 1) // ds, (w + ds - 1) // ds), np.uint8)
+    small[proj.row[on] // ds, proj.col[on] // ds] = 1
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+    small = cv2.dilate(small, disc)
+    if tight:
+        small = cv2.morphologyEx(small, cv2.MORPH_CLOSE, disc)
+    under = small if ds == 1 else cv2.resize(small, (small.shape[1] * ds, small.shape[0] * ds),
+                                             interpolation=cv2.INTER_NEAREST)
+    return under[:h, :w].astype(bool)
+
+
+def hull_silhouettes(cameras: Sequence[Camera], masks: Sequence[np.ndarray], *, size_m: float,
+                     voxel_m: float, unknown: Sequence[np.ndarray | None] | None = None,
+                     ) -> list[np.ndarray]:  # fmt: skip
+    """Per view, the (H, W) bool silhouette of the exact visual hull of ``masks`` (``unknown``
+    pixels do not carve): the largest body the views agree on, so its overlap with each mask
+    bounds what any 3D model can reach with these silhouettes and this calibration (up to the
+    voxel size)."""
+    carving = [np.asarray(m, bool) for m in masks]
+    if unknown is not None:
+        carving = [m if u is None else m | u for m, u in zip(carving, unknown, strict=True)]
+    points, _ = voxel_centres(rays_meeting_point(cameras, masks), size_m, voxel_m)
+    kept, projections = carve(cameras, carving, points)
+    return [splat(cam, proj, kept & proj.seen, voxel_m, tight=True)
+            for cam, proj in zip(cameras, projections, strict=True)]
