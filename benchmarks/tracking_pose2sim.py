@@ -82,17 +82,23 @@ def main() -> None:
         lost, pictures = [], []
         frames = pose_file["frames"]
         show = {frames[0]["frame"], frames[len(frames) // 2]["frame"], frames[-1]["frame"]}
+        unknowns = [unknown[cam.name] for cam in cameras]
         for entry in frames:
+            images = [cv2.imread(str(ws / "silhouettes" / cam.name /
+                                     f"{entry['frame']:06d}.png"), 0) > 127
+                      for cam in cameras]  # fmt: skip
+            if entry["frame"] % 20 == 0:  # the bound does not depend on the track
+                hull = hull_silhouettes(cameras, images, size_m=2.4, voxel_m=0.01,
+                                        unknown=unknowns)  # fmt: skip
+                for cam, h, image, u in zip(cameras, hull, images, unknowns, strict=True):
+                    bounds[cam.name].append(known_iou(h, image, None if u is None else ~u))
             if entry["params"] is None:
                 lost.append(entry["frame"])
                 continue
             vertices = model.posed_vertices(Pose(entry["params"]))
             row = []
-            for cam in cameras:
-                image = cv2.imread(str(ws / "silhouettes" / cam.name /
-                                       f"{entry['frame']:06d}.png"), 0) > 127  # fmt: skip
+            for cam, image, u in zip(cameras, images, unknowns, strict=True):
                 mask = render.render(vertices, model.faces, cam)
-                u = unknown[cam.name]
                 ious[cam.name].append(known_iou(mask, image, None if u is None else ~u))
                 plain[cam.name].append(iou(mask, image))
                 if entry["frame"] in show:
@@ -103,15 +109,6 @@ def main() -> None:
                     if u is not None:
                         over[u] = over[u] // 3 + 40  # unknown pixels dimmed
                     row.append(cv2.resize(over, (over.shape[1] // 4, over.shape[0] // 4)))
-            if entry["frame"] % 20 == 0:
-                images = [cv2.imread(str(ws / "silhouettes" / cam.name /
-                                         f"{entry['frame']:06d}.png"), 0) > 127
-                          for cam in cameras]  # fmt: skip
-                unknowns = [unknown[cam.name] for cam in cameras]
-                hull = hull_silhouettes(cameras, images, size_m=2.4, voxel_m=0.01,
-                                        unknown=unknowns)  # fmt: skip
-                for cam, h, image, u in zip(cameras, hull, images, unknowns, strict=True):
-                    bounds[cam.name].append(known_iou(h, image, None if u is None else ~u))
             if row:
                 pictures.append(np.hstack(row))
         print(f"\ntracked {len(frames) - len(lost)}/{len(frames)} frames; lost: {lost or 'none'}")

@@ -115,14 +115,17 @@ def project_voxels(camera: Camera, points: np.ndarray, box: Box | None = None) -
 
 def carve(cameras: Sequence[Camera], masks: Sequence[np.ndarray], points: np.ndarray, *,
           dilate_px: int = 0, boxes: Sequence[Box | None] | None = None,
-          min_views: int | None = None) -> tuple[np.ndarray, list[Projection]]:
+          min_views: int | None = None, unknown: Sequence[np.ndarray | None] | None = None,
+          ) -> tuple[np.ndarray, list[Projection]]:  # fmt: skip
     """(N,) bool: the voxels (N, 3) inside the visual hull of the non-empty ``masks``, each
     dilated by a disc of ``dilate_px`` pixels first (0: exact); and each view's projection.
 
     A voxel is kept when every non-empty view that sees it (:func:`project_voxels`) has it in
     its silhouette and at least ``min_views`` such views see it (default: all the non-empty
-    views; never fewer than two).
+    views; never fewer than two). ``unknown``: per view, None or (H, W) bool pixels whose
+    label the view cannot tell: they count as silhouette (they do not carve).
     """
+    masks = _with_unknown(masks, unknown)
     boxes = list(boxes) if boxes is not None else [None] * len(cameras)
     inside = np.ones(len(points), bool)
     seen_by = np.zeros(len(points), np.int32)
@@ -142,12 +145,23 @@ def carve(cameras: Sequence[Camera], masks: Sequence[np.ndarray], points: np.nda
     return inside & (seen_by >= max(2, views if min_views is None else min_views)), projections
 
 
+def _with_unknown(masks: Sequence[np.ndarray], unknown: Sequence[np.ndarray | None] | None
+                  ) -> Sequence[np.ndarray]:  # fmt: skip
+    """Each mask with its view's unknown pixels added (they do not carve)."""
+    if unknown is None:
+        return masks
+    return [m if u is None else m | u for m, u in zip(masks, unknown, strict=True)]
+
+
 def visual_hull(cameras: Sequence[Camera], masks: Sequence[np.ndarray], *, size_m: float,
-                voxel_m: float) -> tuple[np.ndarray, int, np.ndarray]:  # fmt: skip
+                voxel_m: float, unknown: Sequence[np.ndarray | None] | None = None,
+                ) -> tuple[np.ndarray, int, np.ndarray]:  # fmt: skip
     """(centres (n**3, 3), n, occupied (n**3,) bool): the exact visual hull on a cube of side
-    ``size_m`` around the point where the silhouettes' centroid rays meet."""
-    points, n = voxel_centres(rays_meeting_point(cameras, masks), size_m, voxel_m)
-    occupied, _ = carve(cameras, masks, points)
+    ``size_m`` around the point where the centroid rays of the silhouettes and their unknown
+    pixels meet (``unknown``: as in :func:`carve`)."""
+    points, n = voxel_centres(rays_meeting_point(cameras, _with_unknown(masks, unknown)),
+                              size_m, voxel_m)
+    occupied, _ = carve(cameras, masks, points, unknown=unknown)
     return points, n, occupied
 
 
@@ -219,9 +233,6 @@ def consistent_silhouettes(cameras: Sequence[Camera], masks: Sequence[np.ndarray
     masks = [np.asarray(m, bool) for m in masks]
     if not config.multi_view_check or sum(bool(m.any()) for m in masks) < 2:
         return masks
-    carving = masks
-    if unknown is not None:
-        carving = [m if u is None else m | u for m, u in zip(masks, unknown, strict=True)]
     points, _ = voxel_centres(rays_meeting_point(cameras, masks), config.check_size_m,
                               config.check_voxel_m)
     size = max(max(m.shape) for m in masks)
@@ -229,8 +240,8 @@ def consistent_silhouettes(cameras: Sequence[Camera], masks: Sequence[np.ndarray
     # Seen by all views but one: a subject partly out of one camera's field stays; a blob
     # whose rays only one other camera sees (behind the subject, below the floor) does not.
     views = sum(bool(m.any()) for m in masks)
-    kept, projections = carve(cameras, carving, points, dilate_px=dilate, boxes=boxes,
-                              min_views=max(2, views - 1))
+    kept, projections = carve(cameras, masks, points, dilate_px=dilate, boxes=boxes,
+                              min_views=max(2, views - 1), unknown=unknown)
     out = []
     for cam, mask, proj in zip(cameras, masks, projections, strict=True):
         on = kept & proj.seen
@@ -273,10 +284,8 @@ def hull_silhouettes(cameras: Sequence[Camera], masks: Sequence[np.ndarray], *, 
     pixels do not carve): the largest body the views agree on, so its overlap with each mask
     bounds what any 3D model can reach with these silhouettes and this calibration (up to the
     voxel size)."""
-    carving = [np.asarray(m, bool) for m in masks]
-    if unknown is not None:
-        carving = [m if u is None else m | u for m, u in zip(carving, unknown, strict=True)]
+    masks = [np.asarray(m, bool) for m in masks]
     points, _ = voxel_centres(rays_meeting_point(cameras, masks), size_m, voxel_m)
-    kept, projections = carve(cameras, carving, points)
+    kept, projections = carve(cameras, masks, points, unknown=unknown)
     return [splat(cam, proj, kept & proj.seen, voxel_m, tight=True)
             for cam, proj in zip(cameras, projections, strict=True)]

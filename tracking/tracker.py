@@ -315,9 +315,8 @@ class SilhouetteTracker:
         if not all(m.any() for m in masks):
             empty = [c.name for c, m in zip(self.cameras, masks, strict=True) if not m.any()]
             raise TrackingLost(f"empty silhouette in {', '.join(empty)}")
-        carving = [m if u is None else m | u for m, u in zip(masks, self.unknown, strict=True)]
-        points, n, occupied = visual_hull(self.cameras, carving, size_m=self.config.hull_size_m,
-                                          voxel_m=self.config.voxel_m)
+        points, n, occupied = visual_hull(self.cameras, masks, size_m=self.config.hull_size_m,
+                                          voxel_m=self.config.voxel_m, unknown=self.unknown)
         return points[surface_voxels(occupied, n)]
 
     def initialise(self, masks: Sequence[np.ndarray], init: Pose | None = None) -> tuple[Pose, str]:
