@@ -69,6 +69,8 @@ def main() -> None:
         reused = (ws / "tracks" / "pose.json").stat().st_mtime < started
         pose_file = json.loads((ws / "tracks" / "pose.json").read_text())
         model = BodyModel(BodyShape(**pose_file["shape"]))
+        # The poses are in the rig's upright frame (Y up); the cameras in the world's.
+        world_from_upright = np.array(pose_file.get("world_from_upright", np.eye(3)))
         cameras = read_cameras(ws / "cameras.json")
         render = CpuRasterRenderer(CpuRasterRenderer.Options())
         ious = {c.name: [] for c in cameras}
@@ -95,7 +97,7 @@ def main() -> None:
             if entry["params"] is None:
                 lost.append(entry["frame"])
                 continue
-            vertices = model.posed_vertices(Pose(entry["params"]))
+            vertices = model.posed_vertices(Pose(entry["params"])) @ world_from_upright.T
             row = []
             for cam, image, u in zip(cameras, images, unknowns, strict=True):
                 mask = render.render(vertices, model.faces, cam)

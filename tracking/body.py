@@ -382,6 +382,38 @@ def axis_angle_rotations(axes: np.ndarray, angles: np.ndarray) -> np.ndarray:
     return np.eye(3) + s * k + (1.0 - c) * (k @ k)
 
 
+def zxy_angles(rotation: np.ndarray) -> np.ndarray:
+    """(rz, rx, ry) rad with rotation = Rz(rz) @ Rx(rx) @ Ry(ry), the root's angle order."""
+    r = np.asarray(rotation, dtype=float)
+    rx = np.arcsin(np.clip(r[2, 1], -1.0, 1.0))
+    if np.hypot(r[0, 1], r[1, 1]) < 1e-9:
+        # Gimbal lock (rx = +-90 degrees): rz and ry turn about the same axis; ry = 0.
+        return np.array([np.arctan2(r[1, 0], r[0, 0]), rx, 0.0])
+    rz = np.arctan2(-r[0, 1], r[1, 1])
+    ry = np.arctan2(-r[2, 0], r[2, 2])
+    return np.array([rz, rx, ry])
+
+
+def root_rotation(pose: Pose) -> np.ndarray:
+    """(3, 3) world_from_pelvis rotation of `pose`."""
+    rows = list(_ROT_ROWS_OF_NODE[NODE_INDEX["pelvis"]])
+    rotation = np.eye(3)
+    for r in axis_angle_rotations(_ROT_AXES[rows], pose.params[_ROT_PARAMS[rows]]):
+        rotation = rotation @ r
+    return rotation
+
+
+def pose_in_frame(pose: Pose, frame_from_world: np.ndarray) -> Pose:
+    """The same posture with its root expressed in another frame, rotated about the origin
+    by ``frame_from_world`` (3, 3): only the root's translation and angles change."""
+    q = np.asarray(frame_from_world, dtype=float)
+    params = pose.params.copy()
+    params[_TRANS_PARAMS] = _TRANS_AXES @ (q @ (pose.params[_TRANS_PARAMS] @ _TRANS_AXES))
+    params[_ROT_PARAMS[list(_ROT_ROWS_OF_NODE[NODE_INDEX["pelvis"]])]] = zxy_angles(
+        q @ root_rotation(pose))
+    return Pose(params)
+
+
 def parent_from_node_transforms(pose: Pose, shape: BodyShape) -> np.ndarray:
     """(16, 4, 4) local transforms; the root's is world_from_pelvis."""
     per_param = axis_angle_rotations(_ROT_AXES, pose.params[_ROT_PARAMS])

@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 from dataclasses import replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -155,16 +156,30 @@ PoseFrames = list[tuple[int, "np.ndarray | None"]]
 """(frame, params (24,) or None when the frame is lost), sorted by frame."""
 
 
-def read_pose_file(path: Path | str) -> tuple[float, BodyShape, PoseFrames]:
-    """Frame rate, shape and (frame, params (24,) or None when lost) sorted by frame, of a
-    pose file::
+class PoseFile(NamedTuple):
+    """A pose file's contents (`read_pose_file`)."""
+
+    frame_rate: float
+    shape: BodyShape
+    frames: PoseFrames
+    world_from_upright: np.ndarray
+    """(3, 3) rotation from the frame of the poses (Y up) to the world frame of the cameras."""
+
+
+def read_pose_file(path: Path | str) -> PoseFile:
+    """Frame rate, shape, (frame, params (24,) or None when lost) sorted by frame, and frame
+    of a pose file::
 
         {"frame_rate": 25.0,
          "shape": {<every BodyShape field>: metres, ...},
          "frames": [{"frame": 0, "params": [24 floats in POSE_LAYOUT order]},
-                    {"frame": 1, "params": null}, ...]}
+                    {"frame": 1, "params": null}, ...],
+         "world_from_upright": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]}
 
-    Other keys are ignored. A one-line `UserError` names what is wrong.
+    The poses are in an upright frame (Y up, gravity along -Y); ``world_from_upright``, a
+    rotation about the origin, takes them to the world frame of the cameras (default: the
+    identity, a Y-up world). Other keys are ignored. A one-line `UserError` names what is
+    wrong.
     """
     path = Path(path)
     try:
@@ -177,9 +192,13 @@ def read_pose_file(path: Path | str) -> tuple[float, BodyShape, PoseFrames]:
         frame_rate = float(data["frame_rate"])
         shape = BodyShape(**{k: float(v) for k, v in data["shape"].items()})
         entries = sorted(data["frames"], key=lambda e: int(e["frame"]))
+        rotation = np.array(data.get("world_from_upright", np.eye(3)), dtype=float)
     except (KeyError, TypeError, ValueError) as exc:
         raise UserError(f"{path}: not a pose track ({exc!s}); expected frame_rate, shape and "
                         "frames") from None
+    if rotation.shape != (3, 3) or not np.allclose(rotation @ rotation.T, np.eye(3),
+                                                   atol=1e-6) or np.linalg.det(rotation) < 0:
+        raise UserError(f"{path}: world_from_upright is not a 3x3 rotation")
     if not entries:
         raise UserError(f"{path} holds no frames")
     frames: list[tuple[int, np.ndarray | None]] = []
@@ -190,4 +209,4 @@ def read_pose_file(path: Path | str) -> tuple[float, BodyShape, PoseFrames]:
             raise UserError(f"{path}: frame {entry['frame']} has {row.size} pose parameters, "
                             f"not {len(POSE_LAYOUT)}")
         frames.append((int(entry["frame"]), row))
-    return frame_rate, shape, frames
+    return PoseFile(frame_rate, shape, frames, rotation)

@@ -219,6 +219,14 @@ class Camera:
         K = np.diag([width / self.width, height / self.height, 1.0]) @ self.K
         return Camera(self.name, width, height, K, self.cam_from_world, self.dist)
 
+    def in_frame(self, world_from_frame: np.ndarray) -> Camera:
+        """The same camera, its pose taking points of another frame: ``world_from_frame`` is a
+        (3, 3) rotation about the origin from that frame's coordinates to the world's."""
+        rotation = self.cam_from_world[:, :3] @ np.asarray(world_from_frame, dtype=np.float64)
+        return Camera(self.name, self.width, self.height, self.K,
+                      np.concatenate([rotation, self.cam_from_world[:, 3:]], axis=1), self.dist)
+
+
 
 def look_at(center_in_world: np.ndarray, target_in_world: np.ndarray,
             up_in_world: Sequence[float] = (0.0, 1.0, 0.0)) -> np.ndarray:
@@ -260,6 +268,40 @@ def ring_cameras(n: int, radius_m: float, height_m: float,
         cameras.append(Camera(f"cam{k:02d}", width, height, K, look_at(center, target)))
     return cameras
 
+
+
+def rig_up(cameras: Sequence[Camera], subject_in_world: np.ndarray) -> np.ndarray | None:
+    """The world's up direction as a camera rig shows it: the normal of the plane through the
+    camera centres, towards the cameras (mounted above the subject's middle, around it).
+    None when the rig gives no such hint (fewer than 3 cameras, or cameras level with it)."""
+    centres = np.array([c.center_in_world for c in cameras])
+    if len(centres) < 3:
+        return None
+    mean = centres.mean(axis=0)
+    normal = np.linalg.svd(centres - mean)[2][-1]
+    height = (mean - np.asarray(subject_in_world, dtype=float)) @ normal
+    spread = np.linalg.norm(centres - mean, axis=1).mean()
+    if abs(height) < 0.05 * spread:
+        return None
+    return normal * np.sign(height)
+
+
+def upright_frame(cameras: Sequence[Camera], subject_in_world: np.ndarray) -> np.ndarray:
+    """(3, 3) world_from_upright: the least rotation taking +Y (the body model's up) to the
+    rig's up (`rig_up`), or the identity when the rig does not tell (world Y is then up).
+
+    Tracking in this frame keeps an upright body far from the gimbal lock of the root's ZXY
+    angles (at a 90 degree pitch), which a Z-up world (Qualisys, Pose2Sim) puts it in.
+    """
+    up = rig_up(cameras, subject_in_world)
+    y = np.array([0.0, 1.0, 0.0])
+    if up is None or np.allclose(up, y, atol=1e-9):
+        return np.eye(3)
+    if up @ y < -1.0 + 1e-9:  # upside down: half a turn about X
+        return np.diag([1.0, -1.0, -1.0])
+    v, c = np.cross(y, up), float(y @ up)
+    k = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    return np.eye(3) + k + k @ k / (1.0 + c)
 
 # ---------------------------------------------------------------------------------------------
 # Readers and writer (disk)

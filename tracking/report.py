@@ -12,8 +12,8 @@ Outputs, in ``report/`` (inside the workspace, or inside ``--out DIR`` for a BVH
 * ``index.html``: summary tables, conventions, assumptions and plots (joint angles, joint
   angular velocities, centre of mass, joint moments), a self-contained folder for a browser;
 * one tidy long-form CSV per quantity (``joint_angles.csv``: ``frame,time_s,joint,angle,
-  degrees``; ``center_of_mass.csv``: ``frame,time_s,x,y,z`` in metres, in the input's world
-  axes; ...). Frames without data have no rows;
+  degrees``; ``center_of_mass.csv``: ``frame,time_s,x,y,z`` in metres, in the input's Y-up
+  axes (a pose file's upright frame; gravity is -Y); ...). Frames without data have no rows;
 * ``motion.trc``: the joint centres as markers (OpenSim / Pose2Sim format, metres, Y up);
 * ``summary.json``: the numbers of the summary, the config and its fingerprint;
 * a Rerun recording (``report/report.rrd``; ``WS/logs/report.rrd`` for a workspace) with the
@@ -219,7 +219,7 @@ def read_pose_track(path: Path, max_frames: int | None = None) -> MotionSequence
     ``params`` null (or containing NaN) marks a frame the tracker lost; frame numbers missing
     from the list are lost frames too.
     """
-    frame_rate, shape, entries = read_pose_file(path)
+    frame_rate, shape, entries, _ = read_pose_file(path)
     first = entries[0][0]
     count = entries[-1][0] - first + 1
     if max_frames is not None:

@@ -54,6 +54,7 @@ from tracking.body import (
     BodyShape,
     Pose,
     forward_kinematics,
+    zxy_angles,
 )
 from tracking.bvh import Motion
 from tracking.bvh import forward_kinematics as bvh_forward_kinematics
@@ -206,14 +207,6 @@ def shape_from_motion(motion: Motion, metres_per_unit: float, frame: int | None 
 # ---------------------------------------------------------------------------------------------
 
 
-def _zxy_angles(r: np.ndarray) -> np.ndarray:
-    """(rz, rx, ry) with r = Rz(rz) @ Rx(rx) @ Ry(ry)."""
-    rx = np.arcsin(np.clip(r[2, 1], -1.0, 1.0))
-    rz = np.arctan2(-r[0, 1], r[1, 1])
-    ry = np.arctan2(-r[2, 0], r[2, 2])
-    return np.array([rz, rx, ry])
-
-
 def _root_from_targets(targets: Mapping[str, np.ndarray], shape: BodyShape) -> np.ndarray | None:
     """Root (tx, ty, tz, rz, rx, ry) aligning the pelvis-frame nodes to targets (Kabsch)."""
     local = {
@@ -231,7 +224,7 @@ def _root_from_targets(targets: Mapping[str, np.ndarray], shape: BodyShape) -> n
     u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
     d = np.sign(np.linalg.det(vt.T @ u.T))
     r = vt.T @ np.diag([1.0, 1.0, d]) @ u.T  # world_from_pelvis
-    return np.concatenate([cb - r @ ca, _zxy_angles(r)])
+    return np.concatenate([cb - r @ ca, zxy_angles(r)])
 
 
 def _residual_fn(names: Sequence[str], target: np.ndarray, shape: BodyShape):

@@ -5,12 +5,19 @@ or `mocap silhouettes`) and writes, each atomically:
 
 * ``tracks/joints.csv``: ``frame,joint,x,y,z``, metres, world frame, the joint names of
   `tracking.body.NODE_NAMES` (those of ``gt/joints.csv``); lost frames have no rows;
-* ``tracks/pose.json``: ``{"frame_rate", "shape": {BodyShape}, "frames": [{"frame", "params"
-  (24, POSE_LAYOUT order) or null when lost, "energy_px", "xor_fraction", "event"}]}``;
+* ``tracks/pose.json``: ``{"frame_rate", "shape": {BodyShape}, "world_from_upright": (3, 3),
+  "frames": [{"frame", "params" (24, POSE_LAYOUT order) or null when lost, "energy_px",
+  "xor_fraction", "event"}]}``;
 * ``tracks/motion.bvh``: the tracked frames on the body skeleton (`tracking.body_motion`); a
   BVH has no gaps, so a lost frame repeats the last tracked pose (pose.json says which);
 * ``logs/track.rrd``: silhouettes and the XOR overlay per camera, the body mesh and skeleton,
   and the energy per frame, on the ``frame`` and ``time`` timelines.
+
+The poses, the BVH and the recording are in the *upright frame* of the camera rig
+(`tracking.cameras.upright_frame`): Y up, as the body model, BVH and OpenSim expect, and the
+world rotated about its origin by ``world_from_upright``. An upright body then has a root
+pitch near 0, far from the gimbal lock of the root's ZXY angles, which a Z-up world
+(Qualisys, Pose2Sim) would put at its 90 degree pitch. ``joints.csv`` is in the world frame.
 """
 
 from __future__ import annotations
@@ -29,7 +36,7 @@ import numpy as np
 from recon.errors import UserError
 from recon.progress import bar as progress_bar
 from recon.workspace import Timer, Workspace, atomic_output, fingerprint, write_json_atomic
-from tracking.body import BONES, NODE_NAMES, BodyModel, BodyShape, Pose
+from tracking.body import BONES, NODE_NAMES, BodyModel, BodyShape, Pose, pose_in_frame
 from tracking.body import node_positions_in_world as _nodes
 from tracking.body_motion import read_pose_file
 from tracking.render import render_views
@@ -111,9 +118,10 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
     if not frames:
         raise UserError(f"no silhouette frames between {step.first} and {step.last}")
     init_shape, init_pose = None, None
-    if step.init_pose is not None:
-        _, init_shape, poses = read_pose_file(step.init_pose)
-        init_pose = next((Pose(p) for _, p in poses if p is not None), None)
+    given = read_pose_file(step.init_pose) if step.init_pose is not None else None
+    if given is not None:
+        init_shape = given.shape
+        init_pose = next((Pose(p) for _, p in given.frames if p is not None), None)
         if init_pose is None:
             raise UserError(f"{step.init_pose}: has no pose")
     upstream = [ws.step(n).fingerprint for n in ("synth", "silhouettes") if ws.step(n)]
@@ -125,14 +133,19 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
     if done := ws.reusable("track", fp, *outputs.values(), overwrite=overwrite):
         return {**done.summary, "up_to_date": True}
     frame_rate = frame_rate_of(ws)
-    tracker = SilhouetteTracker(cameras, config, shape=init_shape,
-                                unknown=unknown_pixels(ws, cameras))
-    results: list[FrameResult] = []
 
     def masks_of(frame: int) -> list[np.ndarray]:
         return [_read_mask(ws.silhouettes_dir / c.name / f"{frame:06d}.png", c) for c in cameras]
 
-    with Timer() as timer, _Recorder(ws, cameras, frame_rate) as recorder:
+    world_from_upright = _upright_frame(cameras, masks_of(frames[0]))
+    if given is not None and init_pose is not None:
+        init_pose = pose_in_frame(init_pose, world_from_upright.T @ given.world_from_upright)
+    upright = [c.in_frame(world_from_upright) for c in cameras]
+    tracker = SilhouetteTracker(upright, config, shape=init_shape,
+                                unknown=unknown_pixels(ws, cameras))
+    results: list[FrameResult] = []
+
+    with Timer() as timer, _Recorder(ws, upright, frame_rate) as recorder:
         if init_shape is None and config.shape_frames > 1:
             shape_frames = frames[:config.shape_frames]
             bar = progress_bar(len(shape_frames), "shape", "frame", enabled=progress)
@@ -153,7 +166,7 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         bar.close()
     if tracker.shape is None or all(r.pose is None for r in results):
         raise UserError("the subject was lost in every frame; see logs/track.rrd")
-    _write_outputs(outputs, results, tracker.shape, frame_rate)
+    _write_outputs(outputs, results, tracker.shape, frame_rate, world_from_upright)
     tracked = [r for r in results if r.pose is not None]
     summary = {
         "frames": len(results), "tracked": len(tracked),
@@ -168,8 +181,21 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
     return summary
 
 
+def _upright_frame(cameras: Sequence[Any], masks: Sequence[np.ndarray]) -> np.ndarray:
+    """`upright_frame` of the rig around the subject of the first frame's silhouettes (the
+    identity when fewer than two views see it)."""
+    from tracking.cameras import upright_frame
+    from tracking.hull import rays_meeting_point
+
+    try:
+        subject = rays_meeting_point(cameras, masks)
+    except ValueError:
+        return np.eye(3)
+    return upright_frame(cameras, subject)
+
+
 def _write_outputs(outputs: dict[str, Path], results: list[FrameResult], shape: BodyShape,
-                   frame_rate: float) -> None:  # fmt: skip
+                   frame_rate: float, world_from_upright: np.ndarray) -> None:  # fmt: skip
     from tracking.body_motion import motion_from_poses
     from tracking.bvh import write_bvh
 
@@ -181,12 +207,13 @@ def _write_outputs(outputs: dict[str, Path], results: list[FrameResult], shape: 
         if r.pose is None:
             continue
         for name, xyz in _nodes(r.pose, shape).items():
-            writer.writerow([r.frame, name, *(f"{v:.6f}" for v in xyz)])
+            writer.writerow([r.frame, name, *(f"{v:.6f}" for v in world_from_upright @ xyz)])
     with atomic_output(outputs["joints"]) as partial:
         partial.write_text(text.getvalue())
     write_json_atomic(outputs["pose"], {
         "frame_rate": frame_rate,
         "shape": dataclasses.asdict(shape),
+        "world_from_upright": world_from_upright.tolist(),
         "frames": [{"frame": r.frame,
                     "params": None if r.pose is None else [float(v) for v in r.pose.params],
                     "energy_px": None if not np.isfinite(r.energy) else r.energy,

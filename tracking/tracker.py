@@ -57,9 +57,11 @@ from tracking.body import (
     BodyShape,
     Pose,
     forward_kinematics,
+    root_rotation,
     scaled_shape,
+    zxy_angles,
 )
-from tracking.cameras import Camera
+from tracking.cameras import Camera, rig_up
 from tracking.contour import ContourConfig, ContourRefiner, refine_shape
 from tracking.energy import SilhouetteEnergy, counted
 from tracking.hull import check_voxel_grid, surface_voxels, visual_hull
@@ -151,6 +153,11 @@ class TrackConfig:
     shape_stride: int = field(
         default=4, metadata={"help": "frame stride of the shape pass's joint refinement"}
     )
+    init_headings: int = field(
+        default=8,
+        metadata={"help": "upright starting poses, at this many headings, that compete with "
+                  "the visual-hull fit at initialisation (0 = the fit alone)"},
+    )  # fmt: skip
     init_simplex_evals: int = field(
         default=120, metadata={"help": "evaluations of each simplex at initialisation"}
     )
@@ -320,33 +327,54 @@ class SilhouetteTracker:
         return points[surface_voxels(occupied, n)]
 
     def initialise(self, masks: Sequence[np.ndarray], init: Pose | None = None) -> tuple[Pose, str]:
-        """The first pose: `init` if given, else a body fitted to the visual hull, then refined
-        against the silhouettes. Sets the shape when it was unknown."""
+        """The first pose: `init` if given, else the best of a body fitted to the visual hull and
+        upright bodies at `init_headings` headings, each refined against the silhouettes. Sets
+        the shape when it was unknown."""
         from tracking.fit import FitConfig, fit_body
 
         if init is None:
             points = self.visual_hull_points(masks)
             if len(points) < 100:
                 raise TrackingLost("the silhouettes do not intersect in a visual hull")
+            up = rig_up(self.cameras, points.mean(axis=0))
             fit = fit_body(points, FitConfig(min_inlier_fraction=0.0, max_median_residual=1.0),
-                           up=_rig_up(self.cameras, points.mean(axis=0)))
+                           up=up)
             estimate_shape = self.shape is None
             if estimate_shape:
-                self.shape = BodyShape.default(fit.shape.height)
+                # A hull carved by few views is fatter than the body, and the fit grows the
+                # model to fill it: a standing subject is no taller than the hull along up.
+                height = fit.shape.height
+                if up is not None:
+                    height = min(height, float(np.ptp(points @ up)) + self.config.voxel_m)
+                self.shape = BodyShape.default(height)
                 self.model = BodyModel(self.shape)
-            init = self._best_hypothesis(masks, fit.pose.params)
+            # The hull fit can put a limb inside the trunk or lean the trunk to explain a
+            # limb: upright bodies at several headings compete with it (each refined by the
+            # whole hierarchy, limb grids over their whole range); the lowest XOR wins.
+            energy = self._energy(masks)
+            pelvis = fit.pose.params[:3].copy()
+            if up is not None:  # standing on the hull's lowest point
+                pelvis += (np.min(points @ up) + self.shape.hip_height - pelvis @ up) * up
+            starts = [self._best_hypothesis(masks, fit.pose.params),
+                      *upright_starts(fit.pose, up, self.config.init_headings, pelvis)]
+            refined = [self._refine_all(energy, p.params.copy(), init=True) for p in starts]
+            scores = [self._objective(energy, x, self.config.final_level) for x in refined]
+            best = int(np.argmin(scores))
+            x = refined[best]
             if estimate_shape and self.config.init_shape:
-                # Few views carve a hull larger than the body, and people differ in
-                # proportions: the segment lengths from the silhouettes' outlines, with the
-                # pose (fixed afterwards: thesis 6.2.4).
-                init = self._refine_shape([masks], [init])[0]
-            message = f"init from visual hull ({len(points)} surface voxels)"
+                # People differ in proportions: the segment lengths from the silhouettes'
+                # outlines, with the pose (fixed afterwards: thesis 6.2.4).
+                x = self._refine_shape([masks], [Pose(x)])[0].params
+                x = self._refine_all(self._energy(masks), x, init=True)
+            start = "its fit" if best == 0 else (
+                f"an upright start at {360 * (best - 1) // (len(starts) - 1)} deg from its fit")
+            message = f"init from visual hull ({len(points)} surface voxels; {start})"
         else:
             if self.shape is None:
                 raise ValueError("an initial pose needs the subject's shape")
             message = "init from the given pose"
+            x = self._refine_all(self._energy(masks), init.params.copy(), init=True)
         self.history = []
-        x = self._refine_all(self._energy(masks), init.params.copy(), init=True)
         return Pose(x), message
 
     def _best_hypothesis(self, masks: Sequence[np.ndarray], x: np.ndarray) -> Pose:
@@ -638,6 +666,31 @@ class SilhouetteTracker:
                            time.perf_counter() - start, event)  # fmt: skip
 
 
+def upright_starts(fit: Pose, up: np.ndarray | None, headings: int,
+                   pelvis: np.ndarray | None = None) -> list[Pose]:  # fmt: skip
+    """Standing poses with their pelvis at `pelvis` (default: `fit`'s), at `headings` headings
+    evenly around `up` (None: `fit`'s own up) from `fit`'s, arms hanging a little away from
+    the body."""
+    rotation = root_rotation(fit)
+    up = rotation[:, 1] if up is None else np.asarray(up, dtype=float)
+    forward = rotation[:, 2] - (rotation[:, 2] @ up) * up
+    if np.linalg.norm(forward) < 1e-6:  # the fit lies along `up`: any heading will do
+        forward = np.linalg.svd(up[None])[2][-1]
+    forward /= np.linalg.norm(forward)
+    starts = []
+    for k in range(headings):
+        a = 2.0 * np.pi * k / headings
+        heading = np.cos(a) * forward + np.sin(a) * np.cross(up, forward)
+        x = np.zeros(N_POSE_PARAMS)
+        x[:3] = fit.params[:3] if pelvis is None else pelvis
+        x[3:6] = zxy_angles(np.stack([np.cross(up, heading), up, heading], axis=1))
+        for side, sign in (("l", 1.0), ("r", -1.0)):
+            x[PARAM_INDEX[f"{side}_shoulder_rz"]] = np.deg2rad(10.0) * sign
+            x[PARAM_INDEX[f"{side}_elbow_flex"]] = np.deg2rad(10.0)
+        starts.append(Pose(np.clip(x, LOWER_LIMITS, UPPER_LIMITS)))
+    return starts
+
+
 def _known_area(masks: Sequence[np.ndarray], known: Sequence[np.ndarray | None]) -> float:
     """Silhouette pixels over all views, counting only the known ones."""
     return float(sum(np.count_nonzero(counted(m, k)) for m, k in zip(masks, known, strict=True)))
@@ -657,19 +710,3 @@ def swap_sides(x: np.ndarray, limb: str) -> np.ndarray:
 
 class TrackingLost(Exception):
     """The subject cannot be found in this frame."""
-
-
-def _rig_up(cameras: Sequence[Camera], subject_in_world: np.ndarray) -> np.ndarray | None:
-    """The world's up direction as a camera rig shows it: the normal of the plane through the
-    camera centres, towards the cameras (mounted above the subject's middle, around it).
-    None when the rig gives no such hint (fewer than 3 cameras, or cameras level with it)."""
-    centres = np.array([c.center_in_world for c in cameras])
-    if len(centres) < 3:
-        return None
-    mean = centres.mean(axis=0)
-    normal = np.linalg.svd(centres - mean)[2][-1]
-    height = (mean - subject_in_world) @ normal
-    spread = np.linalg.norm(centres - mean, axis=1).mean()
-    if abs(height) < 0.05 * spread:
-        return None
-    return normal * np.sign(height)

@@ -20,7 +20,10 @@ from tracking.body import (
     forward_kinematics,
     node_positions_in_world,
     pose_derivative_axes,
+    pose_in_frame,
     rest_offsets,
+    root_rotation,
+    zxy_angles,
     superquadric,
 )
 
@@ -177,6 +180,38 @@ def test_root_euler_order_is_z_then_x_then_y() -> None:
     rz = np.array([[ca, -sa, 0], [sa, ca, 0], [0, 0, 1]])
     rx = np.array([[1, 0, 0], [0, cb, -sb], [0, sb, cb]])
     assert np.allclose(world[NODE_INDEX["pelvis"], :3, :3], rz @ rx)
+
+
+def test_pose_in_a_rotated_frame_is_the_same_body_rotated() -> None:
+    """A pose re-expressed in a frame rotated about the origin moves every node and vertex by
+    that rotation; only the root's six parameters change. Pitch 90 degrees (an upright body
+    in a Z-up world) is the root angles' gimbal lock, where the angles are still exact."""
+    rng = np.random.default_rng(3)
+    for pitch in (0.4, HALF_PI):
+        pose = Pose(rng.uniform(-0.5, 0.5, N_POSE_PARAMS)).clamped()
+        pose = Pose.from_dict({**pose.as_dict(), "root_rx": pitch})
+        q = _rotation(rng)
+        moved = pose_in_frame(pose, q)
+        a, b = forward_kinematics(pose, SHAPE), forward_kinematics(moved, SHAPE)
+        assert np.allclose(q @ a[:, :3, :3], b[:, :3, :3], atol=1e-9)
+        assert np.allclose(a[:, :3, 3] @ q.T, b[:, :3, 3], atol=1e-9)
+        assert np.allclose(MODEL.posed_vertices(pose) @ q.T, MODEL.posed_vertices(moved))
+        assert np.array_equal(moved.params[6:], pose.params[6:])
+        assert np.allclose(root_rotation(moved), b[NODE_INDEX["pelvis"], :3, :3])
+    # zxy_angles inverts the root's rotation; at the lock, one of the equivalent angle sets.
+    for angles in ([0.3, -0.4, 1.1], [0.3, HALF_PI, 1.1], [-2.0, -HALF_PI, 0.5]):
+        pose = Pose.from_dict(dict(zip(("root_rz", "root_rx", "root_ry"), angles, strict=True)))
+        again = Pose.from_dict(dict(zip(("root_rz", "root_rx", "root_ry"),
+                                        zxy_angles(root_rotation(pose)), strict=True)))
+        assert np.allclose(root_rotation(again), root_rotation(pose), atol=1e-9), angles
+        if abs(angles[1]) < 1.0:
+            assert np.allclose(again.params[3:6], angles)
+
+
+def _rotation(rng: np.random.Generator) -> np.ndarray:
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q = q * np.sign(np.diag(r))
+    return q if np.linalg.det(q) > 0 else -q
 
 
 # ------------------------------------------------------------------------- mesh

@@ -12,7 +12,15 @@ import pytest
 
 from recon.evaluation import CameraTruth, write_truth
 from tests.helpers import shared_dataset
-from tracking.cameras import Camera, look_at, read_cameras, ring_cameras, write_cameras_json
+from tracking.cameras import (
+    Camera,
+    look_at,
+    read_cameras,
+    rig_up,
+    ring_cameras,
+    upright_frame,
+    write_cameras_json,
+)
 
 K_VGA = np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]])
 DIST = np.array([-0.2, 0.05, 0.001, -0.002, 0.01])
@@ -103,6 +111,32 @@ def test_ring_cameras_look_at_the_target_from_a_circle():
         assert azimuth == pytest.approx(60.0 * k, abs=1e-9)
     # cam00 is on +Z, in front of a body facing +Z: the body's left (+X) is on the image right.
     assert cams[0].project((target + [0.3, 0, 0])[None])[0][0, 0] > 320.0
+
+
+def test_upright_frame_of_a_z_up_rig_and_cameras_in_it():
+    """A ring of cameras above the subject in a Z-up world (Qualisys, Pose2Sim): the rig's up
+    is +Z, its upright frame takes +Y there, and a camera moved into that frame projects the
+    frame's points where the world camera projects their world positions."""
+    world_from_yup = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # Y -> Z
+    yup = ring_cameras(4, 4.0, 2.5, (0.3, 0.9, -0.2))
+    zup = [c.in_frame(world_from_yup.T) for c in yup]
+    subject = world_from_yup @ np.array([0.3, 0.9, -0.2])
+    assert np.allclose(rig_up(zup, subject), [0.0, 0.0, 1.0])
+    frame = upright_frame(zup, subject)
+    assert np.allclose(frame @ [0.0, 1.0, 0.0], [0.0, 0.0, 1.0])
+    assert np.allclose(frame @ frame.T, np.eye(3)) and np.isclose(np.linalg.det(frame), 1.0)
+    points = np.random.default_rng(0).uniform(-1.0, 1.0, (20, 3)) + [0.3, 0.9, -0.2]
+    for cam_yup, cam_zup in zip(yup, zup, strict=True):
+        uv, depth = cam_zup.in_frame(frame).project(points)  # points in the upright frame
+        uv0, depth0 = cam_zup.project(points @ frame.T)  # ... and in the world
+        assert np.allclose(uv, uv0) and np.allclose(depth, depth0)
+        assert np.allclose(cam_yup.project(points)[0],
+                           cam_zup.project(points @ world_from_yup.T)[0])
+    # A Y-up rig needs no rotation; a level rig (or two cameras) tells nothing.
+    assert np.array_equal(upright_frame(yup, [0.3, 0.9, -0.2]), np.eye(3))
+    level = ring_cameras(4, 4.0, 0.9, (0.0, 0.9, 0.0))
+    assert rig_up(level, [0.0, 0.9, 0.0]) is None and rig_up(yup[:2], [0.0, 0.9, 0.0]) is None
+    assert np.array_equal(upright_frame(level, [0.0, 0.9, 0.0]), np.eye(3))
 
 
 def test_json_round_trip_is_exact(tmp_path):

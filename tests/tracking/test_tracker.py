@@ -9,12 +9,19 @@ import numpy as np
 import pytest
 
 from tests.helpers import recording_entities, run_cli, shared_dataset
-from tracking.body import NODE_NAMES, BodyModel, BodyShape, Pose, node_positions_in_world
+from tracking.body import (
+    NODE_NAMES,
+    BodyModel,
+    BodyShape,
+    Pose,
+    node_positions_in_world,
+    root_rotation,
+)
 from tracking.body_motion import is_body_skeleton, poses_from_motion
 from tracking.bvh import read_bvh
-from tracking.cameras import ring_cameras
+from tracking.cameras import read_cameras, ring_cameras, write_cameras_json
 from tracking.render import CpuRasterRenderer
-from tracking.tracker import SilhouetteTracker, TrackConfig
+from tracking.tracker import SilhouetteTracker, TrackConfig, upright_starts
 
 SHAPE = BodyShape.default(1.75)
 MODEL = BodyModel(SHAPE)
@@ -63,6 +70,26 @@ def test_tracking_follows_a_walk_from_a_given_start(twist_weight):
     assert max(errors) < 30  # 1 px is ~12 mm at 4 m with f = 343 px
 
 
+def test_upright_starts_stand_on_the_given_up_at_even_headings():
+    up = np.array([0.0, 0.0, 1.0])  # a Z-up world
+    fit = Pose.from_dict({"root_tx": 1.0, "root_ty": 2.0, "root_tz": 0.9, "root_rx": 1.4,
+                          "root_ry": 0.3, "l_knee_flex": 1.0})  # fmt: skip
+    starts = upright_starts(fit, up, 4, pelvis=np.array([1.0, 2.0, 0.95]))
+    fit_forward = root_rotation(fit)[:, 2]
+    headings = []
+    for pose in starts:
+        rotation = root_rotation(pose)
+        assert np.allclose(rotation[:, 1], up)  # the body's Y is up: standing
+        assert np.allclose(pose.params[:3], [1.0, 2.0, 0.95])
+        assert pose.as_dict()["l_knee_flex"] == 0.0  # a neutral stance
+        headings.append(np.arctan2(rotation[1, 2], rotation[0, 2]))
+    # Even headings, the first one the fit's own (projected on the ground).
+    assert np.isclose(headings[0], np.arctan2(fit_forward[1], fit_forward[0]))
+    steps = np.diff(np.unwrap(headings))
+    assert np.allclose(steps, np.pi / 2)
+    assert upright_starts(fit, up, 0) == []
+
+
 def test_visual_hull_contains_the_body():
     pose = _walk(1)[0]
     tracker = SilhouetteTracker(CAMERAS, TrackConfig(voxel_m=0.03), shape=SHAPE)
@@ -88,13 +115,18 @@ def test_cli_synth_then_track_writes_every_output(tmp_path):
     ws = tmp_path / "walk"
     made = run_cli("synth", ws, "--bvh", clip, "--frames", "3", "--size", "320x240", "--clean")
     assert made.returncode == 0, made.stderr
+    # The rig as Qualisys and Pose2Sim calibrate it: a Z-up world. The tracker works in the
+    # rig's upright frame (Y up) and writes the joints back in the world frame.
+    world_from_yup = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+    write_cameras_json(ws / "cameras.json", [c.in_frame(world_from_yup.T)
+                                             for c in read_cameras(ws / "cameras.json")])
     result = run_cli("track", ws)
     assert result.returncode == 0, result.stderr
     with (ws / "tracks" / "joints.csv").open() as handle:
         rows = list(csv.DictReader(handle))
     assert list(rows[0]) == ["frame", "joint", "x", "y", "z"] and len(rows) == 3 * 16
     with (ws / "gt" / "joints.csv").open() as handle:
-        truth = {(r["frame"], r["joint"]): np.array([float(r[k]) for k in "xyz"])
+        truth = {(r["frame"], r["joint"]): world_from_yup @ [float(r[k]) for k in "xyz"]
                  for r in csv.DictReader(handle)}  # fmt: skip
     errors = [np.linalg.norm(np.array([float(r[k]) for k in "xyz"]) - truth[r["frame"], r["joint"]])
               for r in rows]  # fmt: skip
@@ -104,6 +136,7 @@ def test_cli_synth_then_track_writes_every_output(tmp_path):
     pose = json.loads((ws / "tracks" / "pose.json").read_text())
     assert [f["frame"] for f in pose["frames"]] == [0, 1, 2]
     assert all(len(f["params"]) == 24 for f in pose["frames"])
+    assert np.allclose(pose["world_from_upright"], world_from_yup, atol=1e-9)
     motion = read_bvh(ws / "tracks" / "motion.bvh")
     assert is_body_skeleton(motion) and motion.num_frames == 3
     poses, _ = poses_from_motion(motion)
