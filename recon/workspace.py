@@ -58,6 +58,20 @@ def package_versions() -> dict[str, str]:
     return versions
 
 
+STEP_VERSIONS: dict[str, int] = {
+    "track": 2,  # poses in the rig's upright frame (pose.json's world_from_upright)
+}
+"""The version of each step's code (unlisted steps: 1). Bump a step's number when its outputs
+change for the same settings (a new format or method): its results in existing workspaces are
+then recomputed instead of reused, and so are those of the steps after it, whose upstream
+fingerprint changes with it."""
+
+
+def _versioned(name: str, step_fingerprint: str) -> str:
+    version = STEP_VERSIONS.get(name, 1)
+    return step_fingerprint if version == 1 else f"{step_fingerprint}.v{version}"
+
+
 def fingerprint(*parts: Any) -> str:
     """Stable short hash of JSON-serialisable parts (configs and upstream fingerprints)."""
     text = json.dumps(parts, sort_keys=True, default=str)
@@ -337,7 +351,7 @@ class Workspace:
         rec = self.step(name)
         return (
             rec is not None
-            and rec.fingerprint == step_fingerprint
+            and rec.fingerprint == _versioned(name, step_fingerprint)
             and all(p.exists() for p in outputs)
         )
 
@@ -357,6 +371,7 @@ class Workspace:
         seconds: float,
         summary: dict[str, Any] | None = None,
     ) -> StepRecord:
+        step_fingerprint = _versioned(name, step_fingerprint)
         run = self.read_run()
         run.setdefault("steps", {})[name] = {
             "fingerprint": step_fingerprint,

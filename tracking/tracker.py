@@ -342,10 +342,14 @@ class SilhouetteTracker:
             estimate_shape = self.shape is None
             if estimate_shape:
                 # A hull carved by few views is fatter than the body, and the fit grows the
-                # model to fill it: a standing subject is no taller than the hull along up.
+                # model to fill it (1.86-2.02 m for the ~1.75 m subject of the Pose2Sim demo,
+                # whose hull is 1.74 m tall): a standing subject is hardly taller than the
+                # hull along up. (Capping at the extent itself cost the synthetic walk 5 mm:
+                # the lengths' refinement then settled elsewhere.)
                 height = fit.shape.height
                 if up is not None:
-                    height = min(height, float(np.ptp(points @ up)) + self.config.voxel_m)
+                    extent = float(np.ptp(points @ up)) + self.config.voxel_m
+                    height = min(height, 1.05 * extent)
                 self.shape = BodyShape.default(height)
                 self.model = BodyModel(self.shape)
             # The hull fit can put a limb inside the trunk or lean the trunk to explain a

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from recon import workspace as workspace_module
 from recon.errors import UserError
 from recon.workspace import Workspace, atomic_output, fingerprint
 
@@ -137,3 +138,19 @@ def test_steps_are_done_only_with_matching_fingerprint_and_outputs(tmp_path):
     assert ws.is_done("step", fp, out)
     assert not ws.is_done("step", fingerprint("step", {"a": 2}), out)
     assert ws.step("step").summary == {"n": 3}
+
+
+def test_a_new_step_version_is_not_reused_and_changes_what_follows(tmp_path, monkeypatch):
+    """A step whose code changed its outputs for the same settings (STEP_VERSIONS) recomputes
+    them in an old workspace, and the steps after it see another upstream fingerprint."""
+    ws = Workspace(tmp_path)
+    out = tmp_path / "out.txt"
+    out.write_text("x")
+    fp = fingerprint("step", {"a": 1})
+    ws.record_step("step", fp, config={}, seconds=0.1)
+    old_upstream = ws.step("step").fingerprint
+    assert ws.is_done("step", fp, out)
+    monkeypatch.setitem(workspace_module.STEP_VERSIONS, "step", 2)
+    assert not ws.is_done("step", fp, out) and ws.reusable("step", fp, out) is None
+    ws.record_step("step", fp, config={}, seconds=0.1)
+    assert ws.is_done("step", fp, out) and ws.step("step").fingerprint != old_upstream

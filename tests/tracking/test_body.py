@@ -23,8 +23,8 @@ from tracking.body import (
     pose_in_frame,
     rest_offsets,
     root_rotation,
-    zxy_angles,
     superquadric,
+    zxy_angles,
 )
 
 SHAPE = BodyShape.default(1.75)

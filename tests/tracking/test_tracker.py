@@ -15,6 +15,7 @@ from tracking.body import (
     BodyShape,
     Pose,
     node_positions_in_world,
+    pose_in_frame,
     root_rotation,
 )
 from tracking.body_motion import is_body_skeleton, poses_from_motion
@@ -109,34 +110,48 @@ def test_an_empty_silhouette_loses_the_frame_without_nan():
     assert result.pose is None and "empty silhouette in cam02" in result.event
 
 
-@pytest.mark.shared_data
-def test_cli_synth_then_track_writes_every_output(tmp_path):
+# The rig as Qualisys and Pose2Sim calibrate it: a Z-up world. The tracker works in the rig's
+# upright frame (Y up) and writes the joints back in the world frame.
+WORLD_FROM_YUP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+
+def _z_up_walk(tmp_path, frames: int):
+    """A synthetic walk workspace (320x240) whose cameras are moved into a Z-up world."""
     clip = shared_dataset("mocap_bvh") / "cmu_02_01_walk.bvh"
     ws = tmp_path / "walk"
-    made = run_cli("synth", ws, "--bvh", clip, "--frames", "3", "--size", "320x240", "--clean")
+    made = run_cli("synth", ws, "--bvh", clip, "--frames", str(frames), "--size", "320x240",
+                   "--clean")  # fmt: skip
     assert made.returncode == 0, made.stderr
-    # The rig as Qualisys and Pose2Sim calibrate it: a Z-up world. The tracker works in the
-    # rig's upright frame (Y up) and writes the joints back in the world frame.
-    world_from_yup = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-    write_cameras_json(ws / "cameras.json", [c.in_frame(world_from_yup.T)
+    write_cameras_json(ws / "cameras.json", [c.in_frame(WORLD_FROM_YUP.T)
                                              for c in read_cameras(ws / "cameras.json")])
-    result = run_cli("track", ws)
-    assert result.returncode == 0, result.stderr
+    return ws
+
+
+def _joint_errors(ws) -> tuple[list[dict], list[float]]:
+    """tracks/joints.csv's rows and their distances (m) to the truth, in the Z-up world."""
     with (ws / "tracks" / "joints.csv").open() as handle:
         rows = list(csv.DictReader(handle))
-    assert list(rows[0]) == ["frame", "joint", "x", "y", "z"] and len(rows) == 3 * 16
     with (ws / "gt" / "joints.csv").open() as handle:
-        truth = {(r["frame"], r["joint"]): world_from_yup @ [float(r[k]) for k in "xyz"]
+        truth = {(r["frame"], r["joint"]): WORLD_FROM_YUP @ [float(r[k]) for k in "xyz"]
                  for r in csv.DictReader(handle)}  # fmt: skip
-    errors = [np.linalg.norm(np.array([float(r[k]) for k in "xyz"]) - truth[r["frame"], r["joint"]])
-              for r in rows]  # fmt: skip
+    return rows, [float(np.linalg.norm(np.array([float(r[k]) for k in "xyz"])
+                                       - truth[r["frame"], r["joint"]])) for r in rows]
+
+
+@pytest.mark.shared_data
+def test_cli_synth_then_track_writes_every_output(tmp_path):
+    ws = _z_up_walk(tmp_path, 3)
+    result = run_cli("track", ws)
+    assert result.returncode == 0, result.stderr
+    rows, errors = _joint_errors(ws)
+    assert list(rows[0]) == ["frame", "joint", "x", "y", "z"] and len(rows) == 3 * 16
     # Automatic start (visual hull, limb hypotheses, shape from the outlines of the 3 frames)
     # at 320x240: measured 18 mm; swapped legs are ~100 mm, a flipped or lost body 300 mm.
     assert np.mean(errors) < 0.04
     pose = json.loads((ws / "tracks" / "pose.json").read_text())
     assert [f["frame"] for f in pose["frames"]] == [0, 1, 2]
     assert all(len(f["params"]) == 24 for f in pose["frames"])
-    assert np.allclose(pose["world_from_upright"], world_from_yup, atol=1e-9)
+    assert np.allclose(pose["world_from_upright"], WORLD_FROM_YUP, atol=1e-9)
     motion = read_bvh(ws / "tracks" / "motion.bvh")
     assert is_body_skeleton(motion) and motion.num_frames == 3
     poses, _ = poses_from_motion(motion)
@@ -152,6 +167,25 @@ def test_cli_synth_then_track_writes_every_output(tmp_path):
     report = run_cli("report", ws)
     assert report.returncode == 2 and "too short" in report.stderr
     assert report.stderr.strip().count("\n") == 0
+
+
+@pytest.mark.shared_data
+def test_cli_track_from_a_given_pose_in_another_frame(tmp_path):
+    """--init-pose FILE: a pose file in the world frame of a Z-up rig (world_from_upright the
+    identity) is re-expressed in the tracker's upright frame; tracked from the true start, the
+    joints stay on the truth. Read as if it were upright, it would start lying on its side."""
+    ws = _z_up_walk(tmp_path, 2)
+    truth = json.loads((ws / "gt" / "pose.json").read_text())
+    for entry in truth["frames"]:
+        entry["params"] = pose_in_frame(Pose(entry["params"]), WORLD_FROM_YUP).params.tolist()
+    given = tmp_path / "start.json"
+    given.write_text(json.dumps(truth))  # no world_from_upright: the world frame
+    result = run_cli("track", ws, "--init-pose", given)
+    assert result.returncode == 0, result.stderr
+    tracked = json.loads((ws / "tracks" / "pose.json").read_text())
+    assert np.allclose(tracked["world_from_upright"], WORLD_FROM_YUP, atol=1e-9)
+    rows, errors = _joint_errors(ws)
+    assert len(rows) == 2 * 16 and np.mean(errors) < 0.03
 
 
 def test_cli_track_needs_a_video_workspace(tmp_path):
