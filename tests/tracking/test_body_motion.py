@@ -2,12 +2,21 @@
 
 from __future__ import annotations
 
+import dataclasses
+import json
+
 import numpy as np
 import pytest
 
+from recon.errors import UserError
 from tests.helpers import shared_dataset
 from tracking.body import NODE_NAMES, BodyShape, Pose, node_positions_in_world
-from tracking.body_motion import is_body_skeleton, motion_from_poses, poses_from_motion
+from tracking.body_motion import (
+    is_body_skeleton,
+    motion_from_poses,
+    poses_from_motion,
+    read_pose_file,
+)
 from tracking.bvh import CMU_METRES_PER_UNIT, format_bvh, parse_bvh, read_bvh
 from tracking.retarget import retarget
 
@@ -71,3 +80,35 @@ def test_other_skeletons_are_refused():
     clip = read_bvh(shared_dataset("mocap_bvh") / "cmu_02_01_walk.bvh")
     with pytest.raises(ValueError, match="not a body-model skeleton"):
         poses_from_motion(clip)
+
+
+def _pose_file(tmp_path, **changes):
+    data = {"frame_rate": 30.0, "shape": dataclasses.asdict(BodyShape.default(1.7)),
+            "frames": [{"frame": 1, "params": None},
+                       {"frame": 0, "params": [0.0] * 24}], **changes}  # fmt: skip
+    path = tmp_path / "pose.json"
+    path.write_text(json.dumps(data))
+    return path
+
+
+def test_pose_file_frames_sorted_and_its_frame_rotation(tmp_path):
+    read = read_pose_file(_pose_file(tmp_path))
+    assert read.frame_rate == 30.0 and [f for f, _ in read.frames] == [0, 1]
+    assert read.frames[1][1] is None and np.array_equal(read.world_from_upright, np.eye(3))
+    z_up = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]
+    assert np.array_equal(read_pose_file(_pose_file(tmp_path, world_from_upright=z_up))
+                          .world_from_upright, z_up)
+
+
+@pytest.mark.parametrize(("changes", "says"), [
+    ({"world_from_upright": [[2, 0, 0], [0, 1, 0], [0, 0, 1]]}, "not a 3x3 rotation"),
+    ({"world_from_upright": [[-1, 0, 0], [0, 1, 0], [0, 0, 1]]}, "not a 3x3 rotation"),
+    ({"world_from_upright": [1, 2]}, "not a 3x3 rotation"),
+    ({"frames": []}, "holds no frames"),
+    ({"frames": [{"frame": 0, "params": [0.0] * 23}]}, "23 pose parameters"),
+    ({"shape": {"height": 1.7}}, "not a pose track"),
+])  # fmt: skip
+def test_bad_pose_files_are_one_line_user_errors(tmp_path, changes, says):
+    with pytest.raises(UserError, match=says) as error:
+        read_pose_file(_pose_file(tmp_path, **changes))
+    assert "\n" not in str(error.value)
