@@ -23,11 +23,17 @@ once per stage and each energy evaluation renders only the moving triangles (`_S
 
 Initialisation (frame 0, and after a lost frame): automatic from the silhouettes. The visual
 hull is carved on a voxel grid around the point where the views' silhouette centroids meet and
-its surface fitted by `tracking.fit.fit_body` (scale and pose). A hull cannot tell left from
-right limbs: the fit and its left/right swaps of legs and arms (`swap_sides`) are each refined
-against the outlines and the lowest XOR wins; the limbs' grids then cover their whole range.
-When the shape is unknown, the segment lengths come from the outlines too, and
-`calibrate_shape` refines them over several frames of a first pass. A pose given by the user
+its surface fitted by `tracking.fit.fit_body` (scale and pose); the height is capped near the
+hull's extent along up, since a hull of few views is fatter than the body and the fit grows to
+fill it. A hull cannot tell left from right limbs: the fit and its left/right swaps of legs and
+arms (`swap_sides`) are each refined against the outlines. The best of them competes with
+upright stances at `init_headings` headings (`upright_starts`), since the fit can fold a limb
+into the trunk or lean the trunk to explain a limb: each is refined by the whole hierarchy with
+the limbs' grids over their whole range, and the lowest XOR wins. When the shape is unknown,
+the segment lengths then come from the outlines, and `calibrate_shape` refines them over
+several frames of a first pass. The rotation angles of the root lock at a 90 degree pitch, so
+an upright body should be tracked in a Y-up frame (`tracking.cameras.upright_frame`; `mocap
+track` does). A pose given by the user
 replaces this ("model alignment", thesis 6.2.4).
 
 A frame whose energy stays above `max_xor_fraction` of the silhouette area (or 1.5 times the
