@@ -447,7 +447,7 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
                       for name, path in photos.items()})
     outputs = [ws.silhouettes_dir / c.name for c in cameras]
     if done := ws.reusable(STEP, fp, *outputs, overwrite=overwrite):
-        return done
+        return dataclasses.replace(done, summary={**done.summary, "up_to_date": True})
 
     fps = {name: info[3] for name, info in counts.items()}
     logged = ({frames[i] for i in _spread(len(frames), config.logged_frames, odd=False)}
@@ -825,8 +825,9 @@ def summary_lines(ws: Workspace, record: StepRecord) -> list[str]:
     s = record.summary
     first, last, step = s["frames"]
     every = f", every {step}th" if step > 1 else ""
+    took = "up to date" if s.get("up_to_date") else f"{record.seconds:.1f} s"
     lines = [f"silhouettes  {len(s['cameras'])} cameras x {s['processed']} frames ({first}-{last}"
-             f"{every}) in {ws.silhouettes_dir} ({record.seconds:.1f} s)",
+             f"{every}) in {ws.silhouettes_dir} ({took})",
              f"background   {s['background']}"]
     for name, cam in s["cameras"].items():
         f = cam["foreground_fraction"]

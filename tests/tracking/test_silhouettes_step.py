@@ -31,6 +31,7 @@ from tracking.silhouettes_step import (
     frame_chunks,
     make_silhouettes,
     median_background,
+    summary_lines,
 )
 from tracking.video import init_video
 
@@ -141,9 +142,12 @@ def test_silhouettes_of_a_moving_blob_match_the_truth(blob_workspace):
         record.summary["warnings"])
     # Unchanged settings: reused without touching the masks; a changed setting recomputes.
     stamp = (ws.silhouettes_dir / "cam00" / "000005.png").stat().st_mtime_ns
-    assert make_silhouettes(ws, SilhouettesConfig(hull=NO_CHECK)).fingerprint == (
-        record.fingerprint)
+    again = make_silhouettes(ws, SilhouettesConfig(hull=NO_CHECK))
+    assert again.fingerprint == record.fingerprint
     assert (ws.silhouettes_dir / "cam00" / "000005.png").stat().st_mtime_ns == stamp
+    # What `mocap silhouettes` prints says so, not the time of the run it reused.
+    assert "(up to date)" in summary_lines(ws, again)[0]
+    assert "(up to date)" not in summary_lines(ws, record)[0]
 
 
 def test_frame_range_and_empty_background_frames(blob_workspace, tmp_path: Path):
