@@ -523,8 +523,9 @@ def build_parser() -> argparse.ArgumentParser:
         "rendered silhouettes best overlap WS/silhouettes in every camera (XOR energy on an "
         "image pyramid), optimised root first, then spine and neck, then each limb (grid "
         "search + downhill simplex). The first frame is initialised automatically from the "
-        "visual hull (or --init-pose). Writes WS/tracks/joints.csv, pose.json, motion.bvh and "
-        "WS/logs/track.rrd.",
+        "visual hull (or --init-pose). Writes WS/tracks/joints.csv (world frame), pose.json "
+        "and motion.bvh (in the camera rig's upright frame, Y up; pose.json holds its "
+        "world_from_upright rotation) and WS/logs/track.rrd.",
     )
     p.add_argument("workspace", type=Path, metavar="WS", help="video workspace")
     p.add_argument("--overwrite", action="store_true", help="recompute even if up to date")
