@@ -25,7 +25,6 @@ Target: track all 100 frames; median IoU >= 0.8.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 import time
@@ -42,7 +41,8 @@ OUT = ROOT / "benchmarks" / "out"
 
 def main() -> None:
     from recon.workspace import Workspace
-    from tracking.body import BodyModel, BodyShape, Pose
+    from tracking.body import BodyModel, Pose
+    from tracking.body_motion import read_pose_file
     from tracking.cameras import read_cameras
     from tracking.energy import iou, known_iou
     from tracking.hull import hull_silhouettes
@@ -67,10 +67,10 @@ def main() -> None:
         t_track = mocap("track", str(ws), *extra)
         # A kept workspace whose tracks are up to date is not tracked again: no speed then.
         reused = (ws / "tracks" / "pose.json").stat().st_mtime < started
-        pose_file = json.loads((ws / "tracks" / "pose.json").read_text())
-        model = BodyModel(BodyShape(**pose_file["shape"]))
+        track = read_pose_file(ws / "tracks" / "pose.json")
+        model = BodyModel(track.shape)
         # The poses are in the rig's upright frame (Y up); the cameras in the world's.
-        world_from_upright = np.array(pose_file.get("world_from_upright", np.eye(3)))
+        world_from_upright = track.world_from_upright
         cameras = read_cameras(ws / "cameras.json")
         render = CpuRasterRenderer(CpuRasterRenderer.Options())
         ious = {c.name: [] for c in cameras}
@@ -82,28 +82,28 @@ def main() -> None:
                 print(f"{name}: background unknown on {u.mean():.1%} of the image")
         bounds = {c.name: [] for c in cameras}
         lost, pictures = [], []
-        frames = pose_file["frames"]
-        show = {frames[0]["frame"], frames[len(frames) // 2]["frame"], frames[-1]["frame"]}
+        frames = track.frames
+        show = {frames[0][0], frames[len(frames) // 2][0], frames[-1][0]}
         unknowns = [unknown[cam.name] for cam in cameras]
-        for entry in frames:
+        for frame, params in frames:
             images = [cv2.imread(str(ws / "silhouettes" / cam.name /
-                                     f"{entry['frame']:06d}.png"), 0) > 127
+                                     f"{frame:06d}.png"), 0) > 127
                       for cam in cameras]  # fmt: skip
-            if entry["frame"] % 20 == 0:  # the bound does not depend on the track
+            if frame % 20 == 0:  # the bound does not depend on the track
                 hull = hull_silhouettes(cameras, images, size_m=2.4, voxel_m=0.01,
                                         unknown=unknowns)  # fmt: skip
                 for cam, h, image, u in zip(cameras, hull, images, unknowns, strict=True):
                     bounds[cam.name].append(known_iou(h, image, None if u is None else ~u))
-            if entry["params"] is None:
-                lost.append(entry["frame"])
+            if params is None:
+                lost.append(frame)
                 continue
-            vertices = model.posed_vertices(Pose(entry["params"])) @ world_from_upright.T
+            vertices = model.posed_vertices(Pose(params)) @ world_from_upright.T
             row = []
             for cam, image, u in zip(cameras, images, unknowns, strict=True):
                 mask = render.render(vertices, model.faces, cam)
                 ious[cam.name].append(known_iou(mask, image, None if u is None else ~u))
                 plain[cam.name].append(iou(mask, image))
-                if entry["frame"] in show:
+                if frame in show:
                     over = np.zeros((*mask.shape, 3), np.uint8)
                     over[mask & ~image] = (60, 60, 230)
                     over[image & ~mask] = (240, 120, 60)

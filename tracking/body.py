@@ -38,6 +38,8 @@ from functools import cached_property
 
 import numpy as np
 
+from tracking.bvh import rotations_to_channels
+
 _DEG = np.pi / 180.0
 
 # ---------------------------------------------------------------------------------------------
@@ -382,18 +384,6 @@ def axis_angle_rotations(axes: np.ndarray, angles: np.ndarray) -> np.ndarray:
     return np.eye(3) + s * k + (1.0 - c) * (k @ k)
 
 
-def zxy_angles(rotation: np.ndarray) -> np.ndarray:
-    """(rz, rx, ry) rad with rotation = Rz(rz) @ Rx(rx) @ Ry(ry), the root's angle order."""
-    r = np.asarray(rotation, dtype=float)
-    rx = np.arcsin(np.clip(r[2, 1], -1.0, 1.0))
-    if np.hypot(r[0, 1], r[1, 1]) < 1e-9:
-        # Gimbal lock (rx = +-90 degrees): rz and ry turn about the same axis; ry = 0.
-        return np.array([np.arctan2(r[1, 0], r[0, 0]), rx, 0.0])
-    rz = np.arctan2(-r[0, 1], r[1, 1])
-    ry = np.arctan2(-r[2, 0], r[2, 2])
-    return np.array([rz, rx, ry])
-
-
 def root_rotation(pose: Pose) -> np.ndarray:
     """(3, 3) world_from_pelvis rotation of `pose`."""
     rows = list(_ROT_ROWS_OF_NODE[NODE_INDEX["pelvis"]])
@@ -409,8 +399,8 @@ def pose_in_frame(pose: Pose, frame_from_world: np.ndarray) -> Pose:
     q = np.asarray(frame_from_world, dtype=float)
     params = pose.params.copy()
     params[_TRANS_PARAMS] = _TRANS_AXES @ (q @ (pose.params[_TRANS_PARAMS] @ _TRANS_AXES))
-    params[_ROT_PARAMS[list(_ROT_ROWS_OF_NODE[NODE_INDEX["pelvis"]])]] = zxy_angles(
-        q @ root_rotation(pose))
+    params[_ROT_PARAMS[list(_ROT_ROWS_OF_NODE[NODE_INDEX["pelvis"]])]] = np.deg2rad(
+        rotations_to_channels(q @ root_rotation(pose), "ZXY"))
     return Pose(params)
 
 

@@ -54,9 +54,8 @@ from tracking.body import (
     BodyShape,
     Pose,
     forward_kinematics,
-    zxy_angles,
 )
-from tracking.bvh import Motion
+from tracking.bvh import Motion, rotations_to_channels
 from tracking.bvh import forward_kinematics as bvh_forward_kinematics
 
 CMU_TO_BODY: dict[str, str] = {
@@ -224,7 +223,7 @@ def _root_from_targets(targets: Mapping[str, np.ndarray], shape: BodyShape) -> n
     u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
     d = np.sign(np.linalg.det(vt.T @ u.T))
     r = vt.T @ np.diag([1.0, 1.0, d]) @ u.T  # world_from_pelvis
-    return np.concatenate([cb - r @ ca, zxy_angles(r)])
+    return np.concatenate([cb - r @ ca, np.deg2rad(rotations_to_channels(r, "ZXY"))])
 
 
 def _residual_fn(names: Sequence[str], target: np.ndarray, shape: BodyShape):

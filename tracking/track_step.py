@@ -138,7 +138,8 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         return [_read_mask(ws.silhouettes_dir / c.name / f"{frame:06d}.png", c) for c in cameras]
 
     world_from_upright = _upright_frame(cameras, masks_of(frames[0]))
-    if given is not None and init_pose is not None:
+    if given is not None:
+        assert init_pose is not None  # a file without a pose was refused above
         init_pose = pose_in_frame(init_pose, world_from_upright.T @ given.world_from_upright)
     upright = [c.in_frame(world_from_upright) for c in cameras]
     tracker = SilhouetteTracker(upright, config, shape=init_shape,

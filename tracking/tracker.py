@@ -65,8 +65,8 @@ from tracking.body import (
     forward_kinematics,
     root_rotation,
     scaled_shape,
-    zxy_angles,
 )
+from tracking.bvh import rotations_to_channels
 from tracking.cameras import Camera, rig_up
 from tracking.contour import ContourConfig, ContourRefiner, refine_shape
 from tracking.energy import SilhouetteEnergy, counted
@@ -365,7 +365,7 @@ class SilhouetteTracker:
             pelvis = fit.pose.params[:3].copy()
             if up is not None:  # standing on the hull's lowest point
                 pelvis += (np.min(points @ up) + self.shape.hip_height - pelvis @ up) * up
-            starts = [self._best_hypothesis(masks, fit.pose.params),
+            starts = [self._best_hypothesis(energy, fit.pose.params),
                       *upright_starts(fit.pose, up, self.config.init_headings, pelvis)]
             refined = [self._refine_all(energy, p.params.copy(), init=True) for p in starts]
             scores = [self._objective(energy, x, self.config.final_level) for x in refined]
@@ -387,12 +387,11 @@ class SilhouetteTracker:
         self.history = []
         return Pose(x), message
 
-    def _best_hypothesis(self, masks: Sequence[np.ndarray], x: np.ndarray) -> Pose:
+    def _best_hypothesis(self, energy: SilhouetteEnergy, x: np.ndarray) -> Pose:
         """The visual hull cannot tell which leg (or arm) is which: of the pose and its
         left/right swaps of the legs, the arms, and both, the one whose outline refinement
         ends with the lowest XOR energy."""
         level = self.config.search_level
-        energy = self._energy(masks)
         refiner = ContourRefiner(energy.model, energy.cameras[level], energy.masks[level],
                                  energy.renderer, ContourConfig(iterations=20),
                                  known=energy.known[level])  # fmt: skip
@@ -693,7 +692,8 @@ def upright_starts(fit: Pose, up: np.ndarray | None, headings: int,
         heading = np.cos(a) * forward + np.sin(a) * np.cross(up, forward)
         x = np.zeros(N_POSE_PARAMS)
         x[:3] = fit.params[:3] if pelvis is None else pelvis
-        x[3:6] = zxy_angles(np.stack([np.cross(up, heading), up, heading], axis=1))
+        x[3:6] = np.deg2rad(rotations_to_channels(
+            np.stack([np.cross(up, heading), up, heading], axis=1), "ZXY"))
         for side, sign in (("l", 1.0), ("r", -1.0)):
             x[PARAM_INDEX[f"{side}_shoulder_rz"]] = np.deg2rad(10.0) * sign
             x[PARAM_INDEX[f"{side}_elbow_flex"]] = np.deg2rad(10.0)

@@ -24,8 +24,8 @@ from tracking.body import (
     rest_offsets,
     root_rotation,
     superquadric,
-    zxy_angles,
 )
+from tracking.bvh import rotations_to_channels
 
 SHAPE = BodyShape.default(1.75)
 MODEL = BodyModel(SHAPE)
@@ -198,11 +198,11 @@ def test_pose_in_a_rotated_frame_is_the_same_body_rotated() -> None:
         assert np.allclose(MODEL.posed_vertices(pose) @ q.T, MODEL.posed_vertices(moved))
         assert np.array_equal(moved.params[6:], pose.params[6:])
         assert np.allclose(root_rotation(moved), b[NODE_INDEX["pelvis"], :3, :3])
-    # zxy_angles inverts the root's rotation; at the lock, one of the equivalent angle sets.
+    # The root's ZXY angles back from its rotation; at the lock, one of the equivalent sets.
     for angles in ([0.3, -0.4, 1.1], [0.3, HALF_PI, 1.1], [-2.0, -HALF_PI, 0.5]):
         pose = Pose.from_dict(dict(zip(("root_rz", "root_rx", "root_ry"), angles, strict=True)))
-        again = Pose.from_dict(dict(zip(("root_rz", "root_rx", "root_ry"),
-                                        zxy_angles(root_rotation(pose)), strict=True)))
+        back = np.deg2rad(rotations_to_channels(root_rotation(pose), "ZXY"))
+        again = Pose.from_dict(dict(zip(("root_rz", "root_rx", "root_ry"), back, strict=True)))
         assert np.allclose(root_rotation(again), root_rotation(pose), atol=1e-9), angles
         if abs(angles[1]) < 1.0:
             assert np.allclose(again.params[3:6], angles)
