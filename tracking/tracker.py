@@ -198,7 +198,8 @@ class TrackConfig:
                                 f"{self.levels}), got {getattr(self, name)}")
         for name, low in (("grid", 1), ("init_grid", 1), ("simplex_evals", 1),
                           ("init_simplex_evals", 1), ("passes", 1), ("shape_stride", 1),
-                          ("shape_frames", 0), ("contour_iterations", 0)):  # fmt: skip
+                          ("shape_frames", 0), ("contour_iterations", 0),
+                          ("init_headings", 0)):  # fmt: skip
             if getattr(self, name) < low:
                 raise UserError(f"{flag(name)} must be >= {low}, got {getattr(self, name)}")
         for name in ("prior_weight", "twist_weight", "range_gain"):

@@ -194,7 +194,8 @@ def test_cli_track_needs_a_video_workspace(tmp_path):
 
 
 @pytest.mark.parametrize("flag", [["--contour-level", "3"], ["--shape-stride", "0"],
-                                  ["--levels", "0"], ["--max-xor-fraction", "0"]])
+                                  ["--levels", "0"], ["--max-xor-fraction", "0"],
+                                  ["--init-headings", "-1"]])
 def test_cli_track_rejects_bad_settings_in_one_line(tmp_path, flag):
     result = run_cli("track", tmp_path, *flag)
     assert result.returncode == 2 and "Traceback" not in result.stderr
