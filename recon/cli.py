@@ -587,12 +587,13 @@ def build_parser() -> argparse.ArgumentParser:
         "init-video",
         help="make a video workspace from synchronised videos and their calibration",
         description="Make a video workspace: WS/cameras.json from the calibration (COLMAP model "
-        "folder, Qualisys .qca.txt, or mocap-cameras-v1 JSON) and WS/videos/<camera>.<ext>, "
-        "hard links (or copies) of the videos, never modified. A camera goes with the video "
-        "named like it (any case), or with --match order the k-th camera of the file with the "
-        "k-th video by the number in its name (Pose2Sim's rule). The videos must have the same "
-        "frame count and their cameras' image size (or be that image scaled to fit with black "
-        "bars, whose camera is then adjusted).",
+        "folder, Qualisys .qca.txt, Pose2Sim/Anipose Calib.toml, or mocap-cameras-v1 JSON) and "
+        "WS/videos/<camera>.<ext>, hard links (or copies) of the videos, never modified. A "
+        "camera goes with the video named like it (any case; '_', '-' and spaces ignored, so "
+        "Pose2Sim's cam_01 goes with cam01.mp4), or with --match order the k-th camera of the "
+        "file with the k-th video by the number in its name (Pose2Sim's rule). The videos must "
+        "have the same frame count and their cameras' image size (or be that image scaled to "
+        "fit with black bars, whose camera is then adjusted).",
     )
     p.add_argument("workspace", type=Path, metavar="WS", help="workspace folder to create")
     p.add_argument("--videos", type=Path, required=True, metavar="DIR",

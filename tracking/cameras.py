@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -28,6 +29,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
 
 CAMERAS_FORMAT = "mocap-cameras-v1"
 """The JSON format of :mod:`recon.evaluation`, extended by an optional ``dist`` per camera."""
@@ -308,11 +314,12 @@ def upright_frame(cameras: Sequence[Camera], subject_in_world: np.ndarray) -> np
 
 
 def read_cameras(path: Path | str) -> list[Camera]:
-    """Cameras of a COLMAP model folder, a Qualisys ``.qca.txt`` file or ``mocap-cameras-v1``.
+    """Cameras of a COLMAP model folder, a Qualisys ``.qca.txt`` file, a Pose2Sim / Anipose
+    ``Calib.toml`` or ``mocap-cameras-v1`` JSON.
 
     COLMAP: one camera per registered image, named by the image, sorted by name. Qualisys:
-    one per camera, named by its serial, in file order. JSON: in file order. Anything else, or
-    a malformed file, raises ValueError with one line naming the file.
+    one per camera, named by its serial, in file order. TOML and JSON: in file order. Anything
+    else, or a malformed file, raises ValueError with one line naming the file.
     """
     path = Path(path)
     try:
@@ -328,9 +335,12 @@ def read_cameras(path: Path | str) -> list[Camera]:
             return _read_qualisys(path)
         if path.suffix.lower() == ".json" or head.startswith(b"{"):
             return _parse_json(json.loads(path.read_text(encoding="utf-8")))
+        if path.suffix.lower() == ".toml":
+            return _parse_toml(tomllib.loads(path.read_text(encoding="utf-8")))
         raise ValueError("unknown camera file format (expected a COLMAP model folder, a "
-                         "Qualisys .qca.txt or mocap-cameras-v1 JSON)")
-    except (ValueError, KeyError, TypeError, ET.ParseError, UnicodeDecodeError) as exc:
+                         "Qualisys .qca.txt, a Pose2Sim Calib.toml or mocap-cameras-v1 JSON)")
+    except (ValueError, KeyError, TypeError, ET.ParseError, UnicodeDecodeError,
+            tomllib.TOMLDecodeError) as exc:
         message = " ".join(str(exc).split()) or type(exc).__name__
         raise ValueError(f"{path}: {message}") from None
 
@@ -424,6 +434,55 @@ def _read_qualisys(path: Path) -> list[Camera]:
     if not cameras:
         raise ValueError("Qualisys calibration has no <camera>")
     return cameras
+
+
+def _parse_toml(document: dict[str, Any]) -> list[Camera]:
+    """Pose2Sim's ``Calib.toml`` (Anipose's format, written by Pose2Sim's calibration and its
+    converters): one table per camera with ``name``, ``size`` ``[width, height]``, ``matrix``
+    (3x3, OpenCV: pixel centres at integers, so ``cx, cy`` gain 0.5 here), ``distortions``
+    (OpenCV ``k1, k2, p1, p2[, k3]``), ``rotation`` (Rodrigues vector of the world-to-camera
+    rotation) and ``translation`` (world-to-camera, metres): what ``cv2.projectPoints`` takes.
+    Tables without a ``matrix`` (Pose2Sim's ``[metadata]``) are skipped; a fisheye camera is
+    refused (its distortion is another model)."""
+    cameras = []
+    for key, entry in document.items():
+        if not isinstance(entry, dict) or "matrix" not in entry:
+            continue
+        name = str(entry.get("name", key))
+        missing = {"size", "rotation", "translation"} - entry.keys()
+        if missing:
+            raise ValueError(f"camera {name!r} lacks {', '.join(sorted(missing))}")
+        if entry.get("fisheye", False):
+            raise ValueError(f"camera {name!r} is a fisheye camera: only OpenCV's pinhole "
+                             "distortion model is supported")
+        size = np.asarray(entry["size"], dtype=np.float64)
+        if size.shape != (2,) or not np.allclose(size, np.round(size)):
+            raise ValueError(f"camera {name!r}: size must be [width, height] in whole pixels")
+        K = np.array(entry["matrix"], dtype=np.float64)
+        if K.shape != (3, 3):
+            raise ValueError(f"camera {name!r}: matrix must be 3x3, got shape {K.shape}")
+        K[:2, 2] += 0.5  # OpenCV's pixel centres at integers -> ours at +0.5
+        R = _rodrigues(np.asarray(entry["rotation"], dtype=np.float64), name)
+        t = np.asarray(entry["translation"], dtype=np.float64)
+        if t.shape != (3,):
+            raise ValueError(f"camera {name!r}: translation must have 3 values")
+        cameras.append(Camera(name, round(size[0]), round(size[1]), K,
+                              np.column_stack([R, t]), entry.get("distortions", ())))
+    if not cameras:
+        raise ValueError("TOML has no camera table (one with a 'matrix')")
+    return cameras
+
+
+def _rodrigues(rvec: np.ndarray, name: str) -> np.ndarray:
+    """(3, 3) rotation of a Rodrigues (axis times angle) vector, as ``cv2.Rodrigues``."""
+    if rvec.shape != (3,) or not np.isfinite(rvec).all():
+        raise ValueError(f"camera {name!r}: rotation must be a Rodrigues vector of 3 values")
+    angle = float(np.linalg.norm(rvec))
+    if angle < 1e-12:
+        return np.eye(3)
+    k = rvec / angle
+    cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * cross + (1.0 - math.cos(angle)) * cross @ cross
 
 
 def _parse_json(document: Any) -> list[Camera]:

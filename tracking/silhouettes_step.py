@@ -60,7 +60,14 @@ from tracking.silhouette import (
     silhouette_from_frame,
 )
 from tracking.video import STEP as INIT_STEP
-from tracking.video import content_box, read_frames, video_info, video_path, workspace_cameras
+from tracking.video import (
+    content_box,
+    name_in_file_name,
+    read_frames,
+    video_info,
+    video_path,
+    workspace_cameras,
+)
 
 STEP = "silhouettes"
 UNKNOWN_NAME = "unknown.png"
@@ -308,7 +315,8 @@ def _odd(length: float) -> int:
 
 def background_images(folder: Path, cameras: Sequence[Camera]) -> dict[str, Path]:
     """Camera name -> its photo in `folder`: the one image whose file name contains the
-    camera's name as a word (``cam01_ext.png`` for cam01, not for cam010); one-line errors for
+    camera's name as a word, case and separators ignored like the videos' names
+    (``cam01_ext.png`` for cam01 or cam_01, not for cam010); one-line errors for
     a missing folder, no photo of any camera, or two photos of one."""
     if not folder.is_dir():
         raise UserError(f"--background-images {folder}: no such folder")
@@ -316,7 +324,7 @@ def background_images(folder: Path, cameras: Sequence[Camera]) -> dict[str, Path
                     if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
     found: dict[str, Path] = {}
     for camera in cameras:
-        word = re.compile(rf"(?<![0-9a-z]){re.escape(camera.name.lower())}(?![0-9a-z])")
+        word = name_in_file_name(camera.name)
         matches = [p for p in images if word.search(p.stem.lower())]
         if len(matches) > 1:
             raise UserError(f"--background-images {folder}: {len(matches)} images name camera "

@@ -12,8 +12,10 @@ Frames are decoded with OpenCV (its FFmpeg backend) and only ever read.
 Matching cameras to videos (``match``):
 
 * ``name`` (default): a camera goes with the video whose file stem equals its name, ignoring
-  case (``cam01`` <-> ``CAM01.mp4``). The Pose2Sim demo's ``Calib.qca.txt`` names its cameras
-  by their ``serial`` attribute, which is ``cam01`` ... ``cam04``, the stems of its videos.
+  case and the separators ``_``, ``-`` and spaces (``cam01`` <-> ``CAM01.mp4``, and
+  Pose2Sim's ``Calib.toml`` names ``cam_01`` <-> ``cam01.mp4``). The Pose2Sim demo's
+  ``Calib.qca.txt`` names its cameras by their ``serial`` attribute, which is ``cam01`` ...
+  ``cam04``, the stems of its videos.
 * ``order``: Pose2Sim's own rule, for calibrations whose names say nothing (numeric Qualisys
   serials): the k-th camera in calibration file order goes with the k-th video, videos sorted
   by the last number in their name (``cam2`` before ``cam10``), then by name.
@@ -222,10 +224,10 @@ def _find_videos(folder: Path) -> list[Path]:
         raise UserError(f"no videos ({', '.join(VIDEO_SUFFIXES)}) in {folder}")
     stems: dict[str, Path] = {}
     for p in videos:
-        if p.stem.lower() in stems:
-            raise UserError(f"{stems[p.stem.lower()].name} and {p.name} in {folder} have the "
+        if _stem_key(p.stem) in stems:
+            raise UserError(f"{stems[_stem_key(p.stem)].name} and {p.name} in {folder} have the "
                             "same name; keep one video per camera")
-        stems[p.stem.lower()] = p
+        stems[_stem_key(p.stem)] = p
     return videos
 
 
@@ -235,12 +237,28 @@ def _last_number(path: Path) -> tuple[int, str]:
 
 
 def _name_key(camera_name: str) -> str:
-    """What a video stem must equal, ignoring case: the camera name, less an image extension
-    (COLMAP names cameras by their image, ``cam01.jpg``)."""
+    """What a video stem must equal once both are keyed: the camera name, less an image
+    extension (COLMAP names cameras by their image, ``cam01.jpg``), lower case, without the
+    separators ``_``, ``-`` and spaces (Pose2Sim's ``cam_01`` for ``cam01.mp4``)."""
     stem, dot, suffix = camera_name.rpartition(".")
     if dot and f".{suffix.lower()}" in IMAGE_SUFFIXES:
-        return stem.lower()
-    return camera_name.lower()
+        camera_name = stem
+    return _stem_key(camera_name)
+
+
+_SEPARATORS = "_- "
+
+
+def _stem_key(stem: str) -> str:
+    return "".join(ch for ch in stem.lower() if ch not in _SEPARATORS)
+
+
+def name_in_file_name(camera_name: str) -> re.Pattern[str]:
+    """A pattern that finds a camera's name as a word in a lower-case file stem, keyed like the
+    videos (case and separators ignored): ``cam01_ext`` names cam01 and cam_01, not cam010."""
+    between = "[" + re.escape(_SEPARATORS) + "]?"
+    body = between.join(re.escape(ch) for ch in _stem_key(camera_name))
+    return re.compile(rf"(?<![0-9a-z]){body}(?![0-9a-z])")
 
 
 def match_videos(cameras: list[Camera], videos: list[Path], rule: str = "name"
@@ -254,7 +272,8 @@ def match_videos(cameras: list[Camera], videos: list[Path], rule: str = "name"
                             "calibration with one camera per video, named like the videos")
     lower = [_name_key(c.name) for c in cameras]
     if len(set(lower)) != len(lower):
-        raise UserError("the calibration has camera names that differ only in case: "
+        raise UserError("the calibration has camera names that differ only in case or "
+                        "separators: "
                         + ", ".join(c.name for c in cameras))
     videos = sorted(videos, key=lambda p: p.name)
     both_sides = (f"calibration cameras: {', '.join(c.name for c in cameras)}; "
@@ -264,16 +283,17 @@ def match_videos(cameras: list[Camera], videos: list[Path], rule: str = "name"
             raise UserError(f"{len(cameras)} calibrated camera(s) but {len(videos)} video(s); "
                             f"matching by order needs as many of each ({both_sides})")
         return list(zip(cameras, sorted(videos, key=_last_number), strict=True))
-    by_stem = {p.stem.lower(): p for p in videos}
+    by_stem = {_stem_key(p.stem): p for p in videos}
     pairs = [(c, by_stem[_name_key(c.name)]) for c in cameras if _name_key(c.name) in by_stem]
     if len(pairs) != len(cameras) or len(pairs) != len(videos):
         cams = [c.name for c in cameras if _name_key(c.name) not in by_stem]
-        vids = [p.name for p in videos if p.stem.lower() not in lower]
+        vids = [p.name for p in videos if _stem_key(p.stem) not in lower]
         unmatched = "; ".join(part for part in (
             f"no video for camera(s) {', '.join(cams)}" if cams else "",
             f"no camera for video(s) {', '.join(vids)}" if vids else "") if part)
         raise UserError(f"cameras and videos do not match one-to-one by name (video file name = "
-                        f"camera name, any case): {unmatched} ({both_sides}); rename the videos, "
+                        f"camera name, any case, '_' and '-' ignored): {unmatched} "
+                        f"({both_sides}); rename the videos, "
                         "or pair them in calibration order with --match order")
     return pairs
 
@@ -337,8 +357,9 @@ def _remove(path: Path) -> None:
 def init_video(ws_root: Path | str, videos_dir: Path | str, calibration: Path | str, *,
                match: str = "name", copy: bool = False, overwrite: bool = False) -> Workspace:
     """Make a video workspace: cameras.json from ``calibration`` (COLMAP model folder,
-    Qualisys ``.qca.txt`` or ``mocap-cameras-v1`` JSON) and ``videos/<camera>.<ext>`` linked
-    (or copied, ``copy=True`` or across file systems) from the videos in ``videos_dir``.
+    Qualisys ``.qca.txt``, Pose2Sim ``Calib.toml`` or ``mocap-cameras-v1`` JSON) and
+    ``videos/<camera>.<ext>`` linked (or copied, ``copy=True`` or across file systems) from the
+    videos in ``videos_dir``.
 
     Everything is checked before the workspace is touched. A workspace that already holds
     exactly these inputs is reused; one holding others needs ``overwrite``, which also removes

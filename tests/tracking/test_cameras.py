@@ -177,6 +177,43 @@ def test_colmap_model_projects_like_pycolmap(tmp_path):
         np.testing.assert_allclose(cam.project(points)[0], expected, atol=1e-6)
 
 
+def _toml_camera(name: str, *, K=K_VGA, dist=DIST[:4], rotation=(0.1, -0.3, 0.05),
+                 translation=(0.2, -0.1, 4.0), size=(640, 480), fisheye=False) -> str:
+    """One camera table of a Pose2Sim Calib.toml, in OpenCV's conventions (pixel centres at
+    integers), as Pose2Sim's calibration writes it."""
+    def row(values) -> str:
+        return "[ " + ", ".join(repr(float(v)) for v in values) + "]"
+
+    K = np.asarray(K, dtype=float)
+    return (f'[{name}]\nname = "{name}"\nsize = {row(size)}\n'
+            f"matrix = [ {', '.join(row(r) for r in K)}]\n"
+            f"distortions = {row(dist)}\nrotation = {row(rotation)}\n"
+            f"translation = {row(translation)}\nfisheye = {str(fisheye).lower()}\n\n")
+
+
+def test_pose2sim_toml_projects_like_opencv(tmp_path):
+    # Two cameras and Pose2Sim's [metadata] table; OpenCV's projectPoints with the file's own
+    # numbers is the reference, half a pixel off (pixel centres at integers there).
+    rvecs = [np.array([0.1, -0.3, 0.05]), np.array([1.69, 1.05, -0.42])]
+    tvecs = [np.array([0.2, -0.1, 4.0]), np.array([0.32, 0.96, 2.89])]
+    K_opencv = np.array([[1681.2, 0.0, 533.0], [0.0, 1681.1, 948.1], [0.0, 0.0, 1.0]])
+    path = tmp_path / "Calib.toml"
+    path.write_text(_toml_camera("cam_01", rotation=rvecs[0], translation=tvecs[0])
+                    + _toml_camera("cam_02", K=K_opencv, dist=DIST, rotation=rvecs[1],
+                                   translation=tvecs[1], size=(1088, 1920))
+                    + "[metadata]\nadjusted = false\nerror = 0.0\n")
+    cams = read_cameras(path)
+    assert [(c.name, c.width, c.height) for c in cams] == [("cam_01", 640, 480),
+                                                          ("cam_02", 1088, 1920)]
+    points = np.random.default_rng(1).uniform(-1.0, 1.0, (100, 3))
+    for cam, K, dist, rvec, tvec in zip(cams, [K_VGA, K_opencv], [DIST[:4], DIST], rvecs,
+                                        tvecs, strict=True):
+        np.testing.assert_allclose(cam.R, cv2.Rodrigues(rvec)[0], atol=1e-12)
+        expected, _ = cv2.projectPoints(points, rvec, tvec, K, dist)
+        np.testing.assert_allclose(cam.project(points)[0], expected.reshape(-1, 2) + 0.5,
+                                   atol=1e-9)
+
+
 @pytest.mark.parametrize(
     ("name", "content", "says"),
     [
@@ -188,6 +225,12 @@ def test_colmap_model_projects_like_pycolmap(tmp_path):
          "lacks"),
         ("x.qca.txt", "<other/>", "expected Qualisys"),
         ("x.qca.txt", "<calibration", "unclosed token"),
+        ("x.toml", "[cam_1\n", "Expected"),
+        ("x.toml", "[metadata]\nadjusted = false\n", "no camera table"),
+        ("x.toml", "[c]\nmatrix = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n", "lacks"),
+        ("x.toml", _toml_camera("c", fisheye=True), "fisheye"),
+        ("x.toml", _toml_camera("c", rotation=[0.1, 0.2]), "Rodrigues"),
+        ("x.toml", _toml_camera("c", size=[640.5, 480]), "whole pixels"),
     ],
 )
 def test_bad_files_give_one_line_value_errors(tmp_path, name, content, says):
@@ -249,6 +292,26 @@ def test_qualisys_calibration_of_the_pose2sim_demo():
         assert uv[1, 1] < uv[0, 1] - 300  # 1 m up is > 300 px higher
         # ... within 27 degrees of the image vertical (the cameras look down and roll a bit).
         assert abs(uv[1, 0] - uv[0, 0]) < 0.5 * abs(uv[1, 1] - uv[0, 1])
+
+
+@pytest.mark.shared_data
+def test_pose2sim_toml_of_the_demo_reads_as_its_qualisys_file(tmp_path):
+    # Pose2Sim converts Calib.qca.txt to Calib.toml (OpenCV's conventions: Rodrigues rotation,
+    # metres, pixel centres at integers, cameras named cam_01...): the same cameras come back.
+    cams = read_cameras(shared_dataset("pose2sim_demo") / "calibration" / "Calib.qca.txt")
+    path = tmp_path / "Calib.toml"
+    path.write_text("".join(
+        _toml_camera(f"cam_{c.name[3:]}", K=c.K - np.array([[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]]),
+                     dist=c.dist, rotation=cv2.Rodrigues(c.R)[0].ravel(), translation=c.t,
+                     size=(c.width, c.height))
+        for c in cams))
+    back = read_cameras(path)
+    assert [c.name for c in back] == ["cam_01", "cam_02", "cam_03", "cam_04"]
+    points = np.random.default_rng(2).uniform(-1.0, 1.0, (50, 3)) + [0.0, 0.0, 1.0]
+    for a, b in zip(cams, back, strict=True):
+        np.testing.assert_allclose(b.K, a.K, atol=1e-9)
+        np.testing.assert_allclose(b.cam_from_world, a.cam_from_world, atol=1e-9)
+        np.testing.assert_allclose(b.project(points)[0], a.project(points)[0], atol=1e-6)
 
 
 def _attribute(document: str, serial: str, key: str) -> str:

@@ -22,12 +22,13 @@ from tests.tracking.test_video import (
     make_ball_scene,
     make_blob_scene,
 )
-from tracking.cameras import read_cameras
+from tracking.cameras import Camera, read_cameras
 from tracking.hull import HullCheckConfig
 from tracking.silhouette import BackgroundModel
 from tracking.silhouettes_step import (
     SilhouettesConfig,
     _free_median,
+    background_images,
     frame_chunks,
     make_silhouettes,
     median_background,
@@ -232,6 +233,21 @@ def test_background_photos_recover_a_subject_who_stays_put(tmp_path: Path):
         make_silhouettes(ws, SilhouettesConfig(background_images=videos))
     with pytest.raises(UserError, match="completes the median background"):
         SilhouettesConfig(background="frames:0-3", background_images=photos)
+
+
+def test_background_images_name_their_camera_as_a_word(tmp_path: Path):
+    # Case and separators do not count (Pose2Sim's Calib.toml names cameras cam_01, its
+    # photos are cam01_ext.png); another camera whose name continues the word does not match.
+    for name in ("cam01_ext.png", "CAM-02 photo.jpg", "cam010_ext.png", "notes.txt"):
+        (tmp_path / name).write_bytes(b"")
+    cams = [Camera(n, 640, 480, np.eye(3), np.column_stack([np.eye(3), np.zeros(3)]))
+            for n in ("cam_01", "cam02", "cam1")]
+    found = background_images(tmp_path, cams)
+    assert {k: v.name for k, v in found.items()} == {"cam_01": "cam01_ext.png",
+                                                      "cam02": "CAM-02 photo.jpg"}
+    (tmp_path / "cam_02_ext.png").write_bytes(b"")
+    with pytest.raises(UserError, match="2 images name camera cam02"):
+        background_images(tmp_path, cams)
 
 
 def test_frame_chunks_split_frames_into_runs_and_bound_the_redecoding():

@@ -210,6 +210,15 @@ def test_cameras_and_videos_pair_by_name_or_by_number_order(tmp_path: Path):
     assert "no video for camera(s) cam00, cam01, cam02" in message
     assert "no camera for video(s) cam1.mp4, cam10.mp4, cam2.mp4" in message
     assert "--match order" in message
+    # Pose2Sim's Calib.toml names cameras cam_01...: separators and case do not count.
+    underscored = [Camera(f"cam_0{k}", c.width, c.height, c.K, c.cam_from_world)
+                   for k, c in enumerate(cams, start=1)]
+    videos = [tmp_path / n for n in ("CAM01.mp4", "cam-02.mp4", "cam03.mp4")]
+    assert [(c.name, p.name) for c, p in match_videos(underscored, videos)] == [
+        ("cam_01", "CAM01.mp4"), ("cam_02", "cam-02.mp4"), ("cam_03", "cam03.mp4")]
+    with pytest.raises(UserError, match="differ only in case or separators"):
+        match_videos([underscored[0], Camera("cam01", 640, 480, cams[0].K,
+                                             cams[0].cam_from_world)], videos[:2])
 
 
 def test_bad_inputs_get_one_line_and_exit_code_2(scene, tmp_path: Path, capsys):
