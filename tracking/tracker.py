@@ -456,6 +456,23 @@ class SilhouetteTracker:
         return Pose(self._refine_all(self._energy(picked[0][0]), poses[0].params.copy(),
                                      init=True))
 
+    def refine(self, masks: Sequence[np.ndarray], pose: Pose, *, passes: int = 2,
+               shape: bool = False) -> Pose:  # fmt: skip
+        """The best pose of one frame this body model reaches from `pose`, with no time in the
+        loop: `passes` runs of the whole hierarchy with every limb's grid over its whole range
+        (what the initialisation gives each start); with `shape`, the segment scales are fitted
+        to this frame alone first (this sets the tracker's shape). A measure of the model
+        rather than of the tracking: how far a tracked pose is from what the model can do."""
+        if self.shape is None:
+            raise ValueError("refine needs the subject's shape")
+        x = pose.params.copy()
+        if shape:
+            x = self._refine_shape([masks], [pose])[0].params
+        energy = self._energy(masks)
+        for _ in range(passes):
+            x = self._refine_all(energy, x, init=True)
+        return Pose(x)
+
     # -- tracking -------------------------------------------------------------------------
     def _energy(self, masks: Sequence[np.ndarray]) -> SilhouetteEnergy:
         assert self.model is not None
