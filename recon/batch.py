@@ -15,8 +15,8 @@ schedulers and the cloud; this module only describes the work as tasks:
   (:func:`tracking.silhouettes_step.cameras_mapped_by`), submitted from the worker;
 * within a ``dense`` task, the stereo pairs of the cpu-stereo backend are tasks of their own
   (:func:`recon.backends.stereo_pairs_mapped_by`), submitted from the worker;
-* :func:`map_ordered` and :func:`silhouettes_parallel` give the same per-item fan-out to other
-  code (silhouettes of every camera and frame), serially when there is no client.
+* :func:`map_ordered` gives the same per-item fan-out to other code, serially when there is no
+  client.
 
 A task never raises for a workspace's own failure: it returns a failed :class:`StepOutcome`,
 the workspace's later steps are skipped and the other workspaces go on. A re-run resumes
@@ -37,7 +37,7 @@ import sys
 import time
 import traceback
 import uuid
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -45,7 +45,6 @@ from typing import TYPE_CHECKING, Any
 from recon.errors import UserError
 
 if TYPE_CHECKING:
-    import numpy as np
     from distributed import Client, Future
 
     from recon.mvs import DenseConfig, MeshConfig
@@ -272,33 +271,6 @@ def _map_on_this_cluster(fn: Callable[..., Any], items: Sequence[Any], *shared: 
 
     with worker_client() as client:
         return map_ordered(client, fn, items, *shared, priority=1)
-
-
-def _silhouette_of(item: tuple[Any, np.ndarray], models: Mapping[Any, Any], config: Any
-                   ) -> np.ndarray:
-    from tracking.silhouette import silhouette_from_frame
-
-    camera, frame_bgr = item
-    return silhouette_from_frame(frame_bgr, models[camera], config)
-
-
-def silhouettes_parallel(
-    frames_by_camera: Mapping[Any, Sequence[np.ndarray]],
-    model_by_camera: Mapping[Any, Any],
-    config: Any = None,
-    client: Client | None = None,
-) -> dict[Any, list[np.ndarray]]:
-    """Silhouette of every frame of every camera, one task per (camera, frame).
-
-    frames_by_camera: camera → its (H, W, 3) uint8 BGR frames in time order; model_by_camera:
-    camera → its ``tracking.silhouette.BackgroundModel``; config: a ``SilhouetteConfig`` or
-    None for the defaults. Returns camera → (H, W) bool masks in frame order, the same as
-    calling ``silhouette_from_frame`` frame by frame (``client=None`` does exactly that).
-    """
-    cameras = list(frames_by_camera)
-    items = [(camera, frame) for camera in cameras for frame in frames_by_camera[camera]]
-    masks = iter(map_ordered(client, _silhouette_of, items, dict(model_by_camera), config))
-    return {camera: [next(masks) for _ in frames_by_camera[camera]] for camera in cameras}
 
 
 # One workspace ------------------------------------------------------------------------------------

@@ -28,7 +28,6 @@ from recon.batch import (
     parse_steps,
     run_batch,
     run_workspace,
-    silhouettes_parallel,
 )
 from recon.errors import UserError
 from recon.mvs import DenseConfig, MeshConfig
@@ -160,33 +159,6 @@ def test_map_ordered_keeps_input_order_on_a_cluster(cluster):
         on_cluster = map_ordered(client, _slow_add, items, 10)
     assert on_cluster == map_ordered(None, _slow_add, items, 10) == [10, 11, 12, 13, 14, 15]
     assert map_ordered(None, _slow_add, [], 1) == []
-
-
-def test_silhouettes_in_parallel_equal_frame_by_frame(cluster):
-    from distributed import Client
-
-    from tracking.silhouette import BackgroundModel, silhouette_from_frame
-
-    rng = np.random.default_rng(0)
-    frames_by_camera, models = {}, {}
-    for camera in ("cam1", "cam0"):  # order of the mapping is kept, not sorted
-        background = rng.integers(60, 200, (48, 64, 3)).astype(np.uint8)
-        models[camera] = BackgroundModel.from_frames([background] * 3)
-        frames = []
-        for k in range(4):
-            frame = background.copy()
-            frame[10:30, 5 + 8 * k:25 + 8 * k] = 255  # a bright square moving right
-            frames.append(frame)
-        frames_by_camera[camera] = frames
-    with Client(cluster) as client:
-        masks = silhouettes_parallel(frames_by_camera, models, None, client)
-    assert list(masks) == ["cam1", "cam0"]
-    for camera, frames in frames_by_camera.items():
-        expected = [silhouette_from_frame(f, models[camera]) for f in frames]
-        assert len(masks[camera]) == 4
-        for got, want in zip(masks[camera], expected, strict=True):
-            np.testing.assert_array_equal(got, want)
-        assert masks[camera][0][20, 15] and not masks[camera][0][40, 60]
 
 
 def test_steps_and_bad_input():
