@@ -322,6 +322,9 @@ class SilhouetteTracker:
         # (the frame's energy, level, its outline refiner): built once per frame and level
         self._refiner: tuple[SilhouetteEnergy, int, ContourRefiner] | None = None
         self.evaluations = 0
+        # How the first pose was found, when `calibrate_shape` found it (the first tracked
+        # frame then starts from that pose, as from a given one).
+        self.start_event = ""
 
     # -- initialisation -------------------------------------------------------------------
     def visual_hull_points(self, masks: Sequence[np.ndarray]) -> np.ndarray:
@@ -436,13 +439,16 @@ class SilhouetteTracker:
         tracking it: the first frame is initialised (with its own shape estimate), the others
         are tracked, and every `shape_stride`-th tracked frame's pose is refined together with
         the segment lengths, which the silhouettes of several poses tell apart better than one.
-        Returns the first frame's pose with that shape; the tracker then starts afresh."""
+        Returns the first frame's pose with that shape; the tracker then starts afresh, and
+        `start_event` says how that pose was found."""
         cfg = self.config
         if self.shape is not None:
             raise ValueError("the shape is already known")
         picked: list[tuple[Sequence[np.ndarray], Pose]] = []
         for index, masks in enumerate(sequence):
             result = self.track(index, masks)
+            if index == 0:
+                self.start_event = f"{result.event}; segment lengths from the first frames"
             if progress is not None:
                 progress()
             if result.pose is None:

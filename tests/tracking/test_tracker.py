@@ -173,6 +173,9 @@ def test_cli_synth_then_track_writes_every_output(tmp_path):
     pose = json.loads((ws / "tracks" / "pose.json").read_text())
     assert [f["frame"] for f in pose["frames"]] == [0, 1, 2]
     assert all(len(f["params"]) == 24 for f in pose["frames"])
+    # The first frame says how it was started: from the silhouettes, not from a given pose.
+    assert pose["frames"][0]["event"].startswith("init from visual hull")
+    assert "segment lengths from the first frames" in pose["frames"][0]["event"]
     assert np.allclose(pose["world_from_upright"], WORLD_FROM_YUP, atol=1e-9)
     motion = read_bvh(ws / "tracks" / "motion.bvh")
     assert is_body_skeleton(motion) and motion.num_frames == 3
