@@ -233,7 +233,6 @@ class Camera:
                       np.concatenate([rotation, self.cam_from_world[:, 3:]], axis=1), self.dist)
 
 
-
 def look_at(center_in_world: np.ndarray, target_in_world: np.ndarray,
             up_in_world: Sequence[float] = (0.0, 1.0, 0.0)) -> np.ndarray:
     """(3, 4) cam_from_world of a camera at ``center`` looking at ``target``, image up = world up.
@@ -275,7 +274,6 @@ def ring_cameras(n: int, radius_m: float, height_m: float,
     return cameras
 
 
-
 def rig_up(cameras: Sequence[Camera], subject_in_world: np.ndarray) -> np.ndarray | None:
     """The world's up direction as a camera rig shows it: the normal of the plane through the
     camera centres, towards the cameras (mounted above the subject's middle, around it).
@@ -308,6 +306,7 @@ def upright_frame(cameras: Sequence[Camera], subject_in_world: np.ndarray) -> np
     v, c = np.cross(y, up), float(y @ up)
     k = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
     return np.eye(3) + k + k @ k / (1.0 + c)
+
 
 # ---------------------------------------------------------------------------------------------
 # Readers and writer (disk)
@@ -475,14 +474,11 @@ def _parse_toml(document: dict[str, Any]) -> list[Camera]:
 
 def _rodrigues(rvec: np.ndarray, name: str) -> np.ndarray:
     """(3, 3) rotation of a Rodrigues (axis times angle) vector, as ``cv2.Rodrigues``."""
+    from scipy.spatial.transform import Rotation
+
     if rvec.shape != (3,) or not np.isfinite(rvec).all():
         raise ValueError(f"camera {name!r}: rotation must be a Rodrigues vector of 3 values")
-    angle = float(np.linalg.norm(rvec))
-    if angle < 1e-12:
-        return np.eye(3)
-    k = rvec / angle
-    cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * cross + (1.0 - math.cos(angle)) * cross @ cross
+    return Rotation.from_rotvec(rvec).as_matrix()
 
 
 def _parse_json(document: Any) -> list[Camera]:

@@ -160,9 +160,6 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         for index, frame in enumerate(frames):
             masks = masks_of(frame)
             result = tracker.track(frame, masks, init=init_pose if index == 0 else None)
-            if index == 0 and given is None and result.event.startswith("init"):
-                # Not "the given pose": the shape pass found it from the silhouettes.
-                result = dataclasses.replace(result, event=tracker.start_event)
             results.append(result)
             recorder.frame(tracker, result, masks)
             bar.set_postfix_str(f"XOR {result.xor_fraction:.0%} {result.event}"[:40])

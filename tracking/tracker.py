@@ -322,9 +322,9 @@ class SilhouetteTracker:
         # (the frame's energy, level, its outline refiner): built once per frame and level
         self._refiner: tuple[SilhouetteEnergy, int, ContourRefiner] | None = None
         self.evaluations = 0
-        # How the first pose was found, when `calibrate_shape` found it (the first tracked
-        # frame then starts from that pose, as from a given one).
-        self.start_event = ""
+        # How `calibrate_shape` found the pose it returns: the first tracked frame starts from
+        # it as from a given pose, and says this instead.
+        self._start_event = ""
 
     # -- initialisation -------------------------------------------------------------------
     def visual_hull_points(self, masks: Sequence[np.ndarray]) -> np.ndarray:
@@ -386,7 +386,7 @@ class SilhouetteTracker:
         else:
             if self.shape is None:
                 raise ValueError("an initial pose needs the subject's shape")
-            message = "init from the given pose"
+            message, self._start_event = self._start_event or "init from the given pose", ""
             x = self._refine_all(self._energy(masks), init.params.copy(), init=True)
         self.history = []
         return Pose(x), message
@@ -439,8 +439,8 @@ class SilhouetteTracker:
         tracking it: the first frame is initialised (with its own shape estimate), the others
         are tracked, and every `shape_stride`-th tracked frame's pose is refined together with
         the segment lengths, which the silhouettes of several poses tell apart better than one.
-        Returns the first frame's pose with that shape; the tracker then starts afresh, and
-        `start_event` says how that pose was found."""
+        Returns the first frame's pose with that shape; the tracker then starts afresh from it
+        and its event says how it was found (not "the given pose")."""
         cfg = self.config
         if self.shape is not None:
             raise ValueError("the shape is already known")
@@ -448,7 +448,7 @@ class SilhouetteTracker:
         for index, masks in enumerate(sequence):
             result = self.track(index, masks)
             if index == 0:
-                self.start_event = f"{result.event}; segment lengths from the first frames"
+                self._start_event = f"{result.event}; segment lengths from the first frames"
             if progress is not None:
                 progress()
             if result.pose is None:

@@ -224,10 +224,11 @@ def _find_videos(folder: Path) -> list[Path]:
         raise UserError(f"no videos ({', '.join(VIDEO_SUFFIXES)}) in {folder}")
     stems: dict[str, Path] = {}
     for p in videos:
-        if _stem_key(p.stem) in stems:
-            raise UserError(f"{stems[_stem_key(p.stem)].name} and {p.name} in {folder} have the "
-                            "same name; keep one video per camera")
-        stems[_stem_key(p.stem)] = p
+        key = _stem_key(p.stem)
+        if key in stems:
+            raise UserError(f"{stems[key].name} and {p.name} in {folder} have the same name; "
+                            "keep one video per camera")
+        stems[key] = p
     return videos
 
 
@@ -284,9 +285,9 @@ def match_videos(cameras: list[Camera], videos: list[Path], rule: str = "name"
                             f"matching by order needs as many of each ({both_sides})")
         return list(zip(cameras, sorted(videos, key=_last_number), strict=True))
     by_stem = {_stem_key(p.stem): p for p in videos}
-    pairs = [(c, by_stem[_name_key(c.name)]) for c in cameras if _name_key(c.name) in by_stem]
+    pairs = [(c, by_stem[key]) for c, key in zip(cameras, lower, strict=True) if key in by_stem]
     if len(pairs) != len(cameras) or len(pairs) != len(videos):
-        cams = [c.name for c in cameras if _name_key(c.name) not in by_stem]
+        cams = [c.name for c, key in zip(cameras, lower, strict=True) if key not in by_stem]
         vids = [p.name for p in videos if _stem_key(p.stem) not in lower]
         unmatched = "; ".join(part for part in (
             f"no video for camera(s) {', '.join(cams)}" if cams else "",
