@@ -54,7 +54,6 @@ def main() -> None:
     from tracking.hull import hull_silhouettes
     from tracking.render import CpuRasterRenderer
     from tracking.track_step import unknown_pixels
-    from tracking.tracker import SilhouetteTracker
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--keep", type=Path, help="keep the workspace in this folder")
@@ -108,9 +107,6 @@ def main() -> None:
                 lost.append(frame)
                 continue
             vertices = model.posed_vertices(Pose(params)) @ world_from_upright.T
-            if frame % 25 == 0 or frame == frames[-1][0]:
-                ceiling.append(_ceiling(SilhouetteTracker, upright, images, unknowns,
-                                        track.shape, Pose(params), render))
             row = []
             for cam, image, u in zip(cameras, images, unknowns, strict=True):
                 mask = render.render(vertices, model.faces, cam)
@@ -126,6 +122,10 @@ def main() -> None:
                     row.append(cv2.resize(over, (over.shape[1] // 4, over.shape[0] // 4)))
             if row:
                 pictures.append(np.hstack(row))
+            if frame % 25 == 0 or frame == frames[-1][0]:
+                ceiling.append(([ious[cam.name][-1] for cam in cameras],
+                                *_reoptimised(upright, images, unknowns, track.shape,
+                                              Pose(params), render)))
         print(f"\ntracked {len(frames) - len(lost)}/{len(frames)} frames; lost: {lost or 'none'}")
         print("silhouette IoU per camera over the known pixels (median, min over frames; "
               "over all pixels):")
@@ -158,10 +158,11 @@ def main() -> None:
             print(f"overlay: {OUT / 'tracking_pose2sim.png'} (frames {sorted(show)})")
 
 
-def _ceiling(tracker_type, cameras, images, unknowns, shape, pose, render):
-    """IoU per view of the tracked pose, of the pose re-optimised on this frame alone, and of
-    pose and shape re-optimised on it (cameras and poses in the upright frame)."""
+def _reoptimised(cameras, images, unknowns, shape, pose, render):
+    """IoU per view of the pose re-optimised on this frame alone, and of pose and shape
+    re-optimised on it (cameras and poses in the upright frame)."""
     from tracking.energy import known_iou
+    from tracking.tracker import SilhouetteTracker
 
     def ious(tracker, p):
         vertices = tracker.model.posed_vertices(p)
@@ -169,9 +170,9 @@ def _ceiling(tracker_type, cameras, images, unknowns, shape, pose, render):
                           None if u is None else ~u)
                 for cam, image, u in zip(cameras, images, unknowns, strict=True)]  # fmt: skip
 
-    fixed = tracker_type(cameras, shape=shape, unknown=unknowns)
-    free = tracker_type(cameras, shape=shape, unknown=unknowns)
-    return (ious(fixed, pose), ious(fixed, fixed.refine(images, pose)),
+    fixed = SilhouetteTracker(cameras, shape=shape, unknown=unknowns)
+    free = SilhouetteTracker(cameras, shape=shape, unknown=unknowns)
+    return (ious(fixed, fixed.refine(images, pose)),
             ious(free, free.refine(images, pose, shape=True)))
 
 
