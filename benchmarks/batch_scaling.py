@@ -36,9 +36,10 @@ def main() -> None:
     from distributed import LocalCluster
 
     from recon.batch import BatchConfig, run_batch
-    from recon.mvs import DenseConfig, MeshConfig
-    from recon.sfm import SfMConfig
-    from recon.synthetic import SyntheticSceneConfig, render_scene, write_scene
+    from recon.dense.step import DenseConfig
+    from recon.evaluation.synthetic_room import SyntheticSceneConfig, render_scene, write_scene
+    from recon.mesh.step import MeshConfig
+    from recon.sfm.pipeline import SfMConfig
     from recon.workspace import Workspace
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -97,8 +98,8 @@ def _silhouettes_scaling(root: Path, frames: int) -> None:
 
     from recon.batch import BatchConfig, BatchStep, run_batch
     from recon.workspace import Workspace
-    from tracking.silhouettes_step import SilhouettesConfig, make_silhouettes
-    from tracking.video import init_video, workspace_cameras
+    from tracking.rig.video import init_video, workspace_cameras
+    from tracking.silhouettes.step import SilhouettesConfig, make_silhouettes
 
     demo = Path(__file__).resolve().parents[2] / "shared" / "data" / "pose2sim_demo"
     if not demo.is_dir():

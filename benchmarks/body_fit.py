@@ -12,7 +12,7 @@ search (rest pose on the principal axes, one orientation), to show what the sear
 
 Targets: mean joint position error <= 15 mm over >= 20 random poses; <= 10 s per fit on 2 cores.
 
-Retargeting: every frame of the two CMU clips is retargeted (`tracking.retarget`) and the
+Retargeting: every frame of the two CMU clips is retargeted (`tracking.body.retarget`) and the
 residual per joint (distance between our node and its CMU joint) reported in mm.
 """
 
@@ -24,8 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from tracking.body import NODE_NAMES, BodyModel, BodyShape, Pose, node_positions_in_world
-from tracking.fit import (
+from tracking.body.model import NODE_NAMES, BodyModel, BodyShape, Pose, node_positions_in_world
+from tracking.body.synthetic import body_cloud, random_pose
+from tracking.fit.body_fit import (
     _H,
     N_POSE_PARAMS,
     FitConfig,
@@ -37,7 +38,6 @@ from tracking.fit import (
     fit_body,
     shape_from_scales,
 )
-from tracking.synthetic import body_cloud, random_pose
 
 ROOT = Path(__file__).resolve().parents[1]
 BVH = ROOT.parent / "shared" / "data" / "mocap_bvh"
@@ -96,8 +96,8 @@ def fitting(poses: int, spread: float) -> None:
 
 
 def retargeting() -> None:
-    from tracking.bvh import CMU_METRES_PER_UNIT, read_bvh
-    from tracking.retarget import cmu_node_positions, retarget
+    from tracking.body.bvh import CMU_METRES_PER_UNIT, read_bvh
+    from tracking.body.retarget import cmu_node_positions, retarget
 
     if not BVH.is_dir():
         print(f"\nretargeting: skipped, {BVH} is absent")

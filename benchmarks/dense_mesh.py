@@ -71,7 +71,7 @@ def _quality(ws: Path, picture: Path) -> dict[str, str]:
     import open3d as o3d
     import pycolmap
 
-    from recon.mesh_metrics import points_to_mesh_distance, render_mesh_png
+    from recon.evaluation.surface import points_to_mesh_distance, render_mesh_png
 
     model = pycolmap.Reconstruction(ws / "sparse" / "0")
     points = np.array([p.xyz for p in model.points3D.values()])

@@ -20,7 +20,7 @@ from pathlib import Path
 import pycolmap
 
 from recon.calibration.compare import CompareConfig, compare_intrinsics
-from recon.sfm import SfMConfig
+from recon.sfm.pipeline import SfMConfig
 from recon.workspace import Workspace
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"

@@ -4,13 +4,13 @@
                                              [--renderers cpu-raster,open3d-raycast,...]
 
 Scene: 4 ring cameras at 640x480 (radius 4 m, at pelvis height, f = 500 px) around the body
-model (:mod:`tracking.body`) in random poses: the 18 joint parameters uniform within
+model (:mod:`tracking.body.model`) in random poses: the 18 joint parameters uniform within
 ``LOWER_LIMITS``/``UPPER_LIMITS``, the root upright at the origin with a uniform heading.
 
 Per renderer, all measured in this run:
 
 * ms per view: median (and max) over poses x cameras, after one warm-up render per camera;
-* energy evaluations per second of :class:`tracking.energy.SilhouetteEnergy` (4 views) at
+* energy evaluations per second of :class:`tracking.track.energy.SilhouetteEnergy` (4 views) at
   pyramid levels 0, 1, 2 (640x480, 320x240, 160x120), for about ``--budget`` seconds each;
 * agreement with ``open3d-raycast``: XOR pixels / ray-cast silhouette pixels, mean and max
   over poses x cameras;
@@ -31,10 +31,10 @@ import time
 import numpy as np
 
 from plugins.registry import PluginError, create
-from tracking.body import LOWER_LIMITS, UPPER_LIMITS, BodyModel, BodyShape, Pose
-from tracking.cameras import ring_cameras
-from tracking.energy import SilhouetteEnergy
-from tracking.render import DEFAULT_RENDERER
+from tracking.body.model import LOWER_LIMITS, UPPER_LIMITS, BodyModel, BodyShape, Pose
+from tracking.rig.cameras import ring_cameras
+from tracking.track.energy import SilhouetteEnergy
+from tracking.track.render import DEFAULT_RENDERER
 
 REFERENCE = "open3d-raycast"
 ALL = ("cpu-raster", "open3d-raycast", "open3d-filament")
@@ -126,7 +126,7 @@ def main() -> int:
         print(f"{name:<17}unavailable: {reason}")
     fastest = min(rows, key=lambda n: rows[n][0])
     print()
-    print(f"fastest: {fastest}; default renderer (tracking.render.DEFAULT_RENDERER): "
+    print(f"fastest: {fastest}; default renderer (tracking.track.render.DEFAULT_RENDERER): "
           f"{DEFAULT_RENDERER}")
     return 0
 

@@ -63,7 +63,11 @@ def main() -> None:
         if images is None and TEMPLE.is_dir():
             images = TEMPLE
         if images is None:
-            from recon.synthetic import SyntheticSceneConfig, render_scene, write_scene
+            from recon.evaluation.synthetic_room import (
+                SyntheticSceneConfig,
+                render_scene,
+                write_scene,
+            )
 
             images = tmp / "scene" / "images"
             write_scene(render_scene(SyntheticSceneConfig()), images, tmp / "scene" / "t.json")

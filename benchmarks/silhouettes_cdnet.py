@@ -6,7 +6,8 @@ Scoring is CDnet's: frames of temporalROI.txt (470 to the last frame present, 90
 pixels inside ROI.bmp, ground truth 255 foreground, 0 and 50 (shadow) background, 85 and 170
 not counted; precision, recall and F-measure from the counts summed over all scored frames.
 
-Ours (tracking.silhouette, default SilhouetteConfig): the highway has cars in most of its early
+Ours (tracking.silhouettes.subtraction, default SilhouetteConfig): the highway has cars in most of
+its early
 frames, so there is no empty frame for the thesis' mean and standard deviation; the background
 is the temporal median of every second frame before the scored range (1-469), the spread the
 median absolute deviation x 1.4826. A car covers a given pixel in far fewer than half of those
@@ -33,7 +34,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from tracking.silhouette import (
+from tracking.silhouettes.subtraction import (
     BackgroundModel,
     Counts,
     Label,

@@ -14,7 +14,8 @@ for a few frames: benchmarks/out/tracking_pose2sim.png.
 
 What the silhouettes allow, measured in the same run: on every 20th frame, the IoU of each
 view's silhouette with the silhouette of the exact visual hull of all four views
-(`tracking.hull.hull_silhouettes`, 1 cm voxels). The hull is the largest body the views agree
+(`tracking.silhouettes.hull.hull_silhouettes`, 1 cm voxels). The hull is the largest body the
+views agree
 on, so no model can do much better; calibration, synchronisation and silhouette errors all
 lower it. The voxels lower it a little too (on the demo's frames 0 and 50, 2 cm voxels give
 0.80 and 0.81, 1.5 cm 0.83 and 0.81, 1 cm 0.85 and 0.85, median over the views).
@@ -47,13 +48,13 @@ OUT = ROOT / "benchmarks" / "out"
 
 def main() -> None:
     from recon.workspace import Workspace
-    from tracking.body import BodyModel, Pose
-    from tracking.body_motion import read_pose_file
-    from tracking.cameras import read_cameras
-    from tracking.energy import iou, known_iou
-    from tracking.hull import hull_silhouettes
-    from tracking.render import CpuRasterRenderer
-    from tracking.track_step import unknown_pixels
+    from tracking.body.model import BodyModel, Pose
+    from tracking.body.motion import read_pose_file
+    from tracking.rig.cameras import read_cameras
+    from tracking.silhouettes.hull import hull_silhouettes
+    from tracking.track.energy import iou, known_iou
+    from tracking.track.render import CpuRasterRenderer
+    from tracking.track.step import unknown_pixels
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--keep", type=Path, help="keep the workspace in this folder")
@@ -161,8 +162,8 @@ def main() -> None:
 def _reoptimised(cameras, images, unknowns, shape, pose, render):
     """IoU per view of the pose re-optimised on this frame alone, and of pose and shape
     re-optimised on it (cameras and poses in the upright frame)."""
-    from tracking.energy import known_iou
-    from tracking.tracker import SilhouetteTracker
+    from tracking.track.energy import known_iou
+    from tracking.track.tracker import SilhouetteTracker
 
     def ious(tracker, p):
         vertices = tracker.model.posed_vertices(p)

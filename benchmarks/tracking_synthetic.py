@@ -39,10 +39,10 @@ def _joints(path: Path) -> dict[int, dict[str, np.ndarray]]:
 
 def _renderer_speeds(ws: Path) -> None:
     from plugins.registry import create
-    from tracking.body import BodyModel, BodyShape, Pose
-    from tracking.cameras import read_cameras
-    from tracking.energy import SilhouetteEnergy
-    from tracking.render import filament_unavailable_reason
+    from tracking.body.model import BodyModel, BodyShape, Pose
+    from tracking.rig.cameras import read_cameras
+    from tracking.track.energy import SilhouetteEnergy
+    from tracking.track.render import filament_unavailable_reason
 
     pose_file = json.loads((ws / "gt" / "pose.json").read_text())
     shape = BodyShape(**pose_file["shape"])

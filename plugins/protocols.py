@@ -140,6 +140,6 @@ class SilhouetteRenderer(Protocol):
 
     def render(self, vertices_in_world: Any, faces: Any, camera: Any) -> Any:
         """vertices (V, 3) float in metres, faces (F, 3) int, ``camera`` a
-        ``tracking.cameras.Camera`` (typed Any: plugins must not import tracking) ->
+        ``tracking.rig.cameras.Camera`` (typed Any: plugins must not import tracking) ->
         (camera.height, camera.width) bool mask, True where the pixel centre sees the mesh."""
         ...

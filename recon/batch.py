@@ -12,9 +12,9 @@ schedulers and the cloud; this module only describes the work as tasks:
 * within a ``silhouettes`` task, each camera's background model is a task of its own, then
   each run of about a dozen of a camera's frames (decoding, classification, masks) is one, the
   models sent once to the workers as :func:`map_ordered`'s shared argument
-  (:func:`tracking.silhouettes_step.cameras_mapped_by`), submitted from the worker;
+  (:func:`tracking.silhouettes.step.cameras_mapped_by`), submitted from the worker;
 * within a ``dense`` task, the stereo pairs of the cpu-stereo backend are tasks of their own
-  (:func:`recon.backends.stereo_pairs_mapped_by`), submitted from the worker;
+  (:func:`recon.dense.backends.stereo_pairs_mapped_by`), submitted from the worker;
 * :func:`map_ordered` gives the same per-item fan-out to other code, serially when there is no
   client.
 
@@ -47,11 +47,12 @@ from recon.errors import UserError
 if TYPE_CHECKING:
     from distributed import Client, Future
 
-    from recon.mvs import DenseConfig, MeshConfig
-    from recon.sfm import SfMConfig
-    from tracking.silhouettes_step import SilhouettesConfig
-    from tracking.track_step import TrackStepConfig
-    from tracking.tracker import TrackConfig
+    from recon.dense.step import DenseConfig
+    from recon.mesh.step import MeshConfig
+    from recon.sfm.pipeline import SfMConfig
+    from tracking.silhouettes.step import SilhouettesConfig
+    from tracking.track.step import TrackStepConfig
+    from tracking.track.tracker import TrackConfig
 
 
 class BatchStep(enum.StrEnum):
@@ -276,8 +277,9 @@ def _map_on_this_cluster(fn: Callable[..., Any], items: Sequence[Any], *shared: 
 # One workspace ------------------------------------------------------------------------------------
 def _run_step(root: Path, step: BatchStep, settings: _Settings) -> StepOutcome:
     """One step of one workspace, through the workspace contract; raises on failure."""
-    from recon.mvs import densify, make_mesh
-    from recon.sfm import STEPS
+    from recon.dense.step import densify
+    from recon.mesh.step import make_mesh
+    from recon.sfm.pipeline import STEPS
     from recon.workspace import Timer, Workspace
 
     if step in VIDEO_STEPS:
@@ -311,8 +313,8 @@ def _run_step(root: Path, step: BatchStep, settings: _Settings) -> StepOutcome:
 def _run_video_step(root: Path, step: BatchStep, settings: _Settings) -> StepOutcome:
     """``silhouettes`` or ``track`` of one video workspace; raises on failure."""
     from recon.workspace import Timer, Workspace
-    from tracking.silhouettes_step import make_silhouettes
-    from tracking.track_step import track_workspace
+    from tracking.silhouettes.step import make_silhouettes
+    from tracking.track.step import track_workspace
 
     ws = Workspace.open_video(root)
     with Timer() as timer:
@@ -418,11 +420,12 @@ def _settings(sfm: Any, dense: Any, mesh: Any, *, overwrite: bool, pair_tasks: b
               silhouettes: Any = None, track_step: Any = None, track: Any = None) -> _Settings:
     import pycolmap
 
-    from recon.mvs import DenseConfig, MeshConfig
-    from recon.sfm import SfMConfig
-    from tracking.silhouettes_step import SilhouettesConfig
-    from tracking.track_step import TrackStepConfig
-    from tracking.tracker import TrackConfig
+    from recon.dense.step import DenseConfig
+    from recon.mesh.step import MeshConfig
+    from recon.sfm.pipeline import SfMConfig
+    from tracking.silhouettes.step import SilhouettesConfig
+    from tracking.track.step import TrackStepConfig
+    from tracking.track.tracker import TrackConfig
 
     return _Settings(sfm=sfm or SfMConfig(), dense=dense or DenseConfig(),
                      mesh=mesh or MeshConfig(), silhouettes=silhouettes or SilhouettesConfig(),
@@ -457,7 +460,7 @@ def _prepare_worker(nthreads: int) -> None:
     worker per core, and more threads per worker would only compete (stereo results do not
     depend on it).
     """
-    importlib.import_module("recon.meshing")  # open3d and pymeshlab
+    importlib.import_module("recon.mesh.meshing")  # open3d and pymeshlab
     importlib.import_module("pycolmap")
     importlib.import_module("cv2").setNumThreads(max(1, nthreads))
     if not isinstance(sys.stderr, _NotATerminal):
@@ -482,8 +485,8 @@ def _step_task(root: str, step: BatchStep, settings: _Settings,
     succeed. Returns its outcome and never raises for the workspace's own errors."""
     import pycolmap
 
-    from recon.backends import stereo_pairs_mapped_by
-    from tracking.silhouettes_step import cameras_mapped_by
+    from recon.dense.backends import stereo_pairs_mapped_by
+    from tracking.silhouettes.step import cameras_mapped_by
 
     if upstream is not None and not upstream.ok:
         return StepOutcome(step, StepStatus.SKIPPED)

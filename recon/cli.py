@@ -43,7 +43,7 @@ def _cmd_init(args: argparse.Namespace) -> None:
 
 
 def _cmd_sfm(args: argparse.Namespace) -> None:
-    from recon.sfm import SfMConfig, run_sfm
+    from recon.sfm.pipeline import SfMConfig, run_sfm
     from recon.workspace import Workspace
 
     config = config_from_args(SfMConfig, args)
@@ -58,7 +58,7 @@ def _cmd_sfm(args: argparse.Namespace) -> None:
 
 
 def _cmd_dense(args: argparse.Namespace) -> None:
-    from recon.mvs import DenseConfig, densify
+    from recon.dense.step import DenseConfig, densify
     from recon.workspace import Workspace
 
     ws = Workspace.open(args.workspace)
@@ -72,7 +72,7 @@ def _cmd_dense(args: argparse.Namespace) -> None:
 
 
 def _cmd_mesh(args: argparse.Namespace) -> None:
-    from recon.mvs import MeshConfig, make_mesh, mesh_paths
+    from recon.mesh.step import MeshConfig, make_mesh, mesh_paths
     from recon.workspace import Workspace
 
     ws = Workspace.open(args.workspace)
@@ -86,8 +86,9 @@ def _cmd_mesh(args: argparse.Namespace) -> None:
 
 
 def _cmd_run(args: argparse.Namespace) -> None:
-    from recon.mvs import DenseConfig, MeshConfig, densify, make_mesh, mesh_paths
-    from recon.sfm import SfMConfig, run_sfm
+    from recon.dense.step import DenseConfig, densify
+    from recon.mesh.step import MeshConfig, make_mesh, mesh_paths
+    from recon.sfm.pipeline import SfMConfig, run_sfm
     from recon.workspace import Workspace
 
     if args.images is not None:
@@ -113,9 +114,10 @@ def _cmd_run(args: argparse.Namespace) -> None:
 
 def _cmd_batch(args: argparse.Namespace) -> None:
     from recon.batch import BatchConfig, parse_steps, run_batch
-    from recon.mvs import DenseConfig, MeshConfig
-    from recon.sfm import SfMConfig
-    from tracking.tracker import TrackConfig
+    from recon.dense.step import DenseConfig
+    from recon.mesh.step import MeshConfig
+    from recon.sfm.pipeline import SfMConfig
+    from tracking.track.tracker import TrackConfig
 
     report = run_batch(
         args.workspaces,
@@ -134,7 +136,7 @@ def _cmd_batch(args: argparse.Namespace) -> None:
 
 
 def _cmd_body(args: argparse.Namespace) -> None:
-    from tracking.export import BodyExportConfig, export_body
+    from tracking.body.export import BodyExportConfig, export_body
 
     out = export_body(config_from_args(BodyExportConfig, args))
     print(f"body mesh  {out['mesh']}  ({out['vertices']} vertices, {out['faces']} faces)")
@@ -178,8 +180,9 @@ def _cmd_plugins(args: argparse.Namespace) -> None:
 
 def _cmd_demo(args: argparse.Namespace) -> None:
     from recon.demo import DemoConfig, run_demo
-    from recon.mvs import DenseConfig, MeshConfig
-    from recon.sfm import SfMConfig
+    from recon.dense.step import DenseConfig
+    from recon.mesh.step import MeshConfig
+    from recon.sfm.pipeline import SfMConfig
 
     config = config_from_args(DemoConfig, args)
     report = run_demo(
@@ -194,7 +197,7 @@ def _cmd_demo(args: argparse.Namespace) -> None:
 
 def _cmd_compare(args: argparse.Namespace) -> None:
     from recon.calibration.compare import CompareConfig, compare_intrinsics
-    from recon.sfm import SfMConfig
+    from recon.sfm.pipeline import SfMConfig
     from recon.workspace import Workspace
 
     ws = Workspace.open(args.workspace)
@@ -206,7 +209,7 @@ def _cmd_compare(args: argparse.Namespace) -> None:
 
 
 def _cmd_report(args: argparse.Namespace) -> None:
-    from tracking.report import ReportConfig, report_from_bvh, report_from_workspace
+    from tracking.report.step import ReportConfig, report_from_bvh, report_from_workspace
 
     config = config_from_args(ReportConfig, args)
     if (args.workspace is None) == (args.bvh is None):
@@ -222,8 +225,8 @@ def _cmd_report(args: argparse.Namespace) -> None:
 
 def _cmd_fit(args: argparse.Namespace) -> None:
     from recon.workspace import Workspace
-    from tracking.fit import FitConfig
-    from tracking.fit_cloud import FitCloudConfig, SubjectConfig, fit_cloud_file, fit_workspace
+    from tracking.fit.body_fit import FitConfig
+    from tracking.fit.step import FitCloudConfig, SubjectConfig, fit_cloud_file, fit_workspace
 
     if (args.workspace is None) == (args.cloud is None):
         raise UserError("give either a workspace (mocap fit WS) or --cloud FILE.ply --out DIR")
@@ -245,7 +248,7 @@ def _cmd_fit(args: argparse.Namespace) -> None:
 
 
 def _cmd_init_video(args: argparse.Namespace) -> None:
-    from tracking.video import STEP, init_video
+    from tracking.rig.video import STEP, init_video
 
     ws = init_video(args.workspace, args.videos, args.calibration, match=args.match,
                     copy=args.copy, overwrite=args.overwrite)
@@ -259,9 +262,9 @@ def _cmd_init_video(args: argparse.Namespace) -> None:
 def _silhouettes_config(args: argparse.Namespace) -> Any:
     """`SilhouettesConfig` from the flags of `mocap silhouettes` (and `mocap batch`), with its
     nested threshold and multi-view check settings."""
-    from tracking.hull import HullCheckConfig
-    from tracking.silhouette import SilhouetteConfig
-    from tracking.silhouettes_step import SilhouettesConfig
+    from tracking.silhouettes.hull import HullCheckConfig
+    from tracking.silhouettes.step import SilhouettesConfig
+    from tracking.silhouettes.subtraction import SilhouetteConfig
 
     try:
         thresholds = config_from_args(SilhouetteConfig, args)
@@ -273,7 +276,7 @@ def _silhouettes_config(args: argparse.Namespace) -> Any:
 
 def _cmd_silhouettes(args: argparse.Namespace) -> None:
     from recon.workspace import Workspace
-    from tracking.silhouettes_step import make_silhouettes, summary_lines
+    from tracking.silhouettes.step import make_silhouettes, summary_lines
 
     config = _silhouettes_config(args)
     ws = Workspace.open_video(args.workspace)
@@ -281,7 +284,7 @@ def _cmd_silhouettes(args: argparse.Namespace) -> None:
 
 
 def _cmd_synth(args: argparse.Namespace) -> None:
-    from tracking.synth import SynthConfig, synthesize
+    from tracking.rig.synth import SynthConfig, synthesize
 
     if args.bvh is None:
         raise UserError("--bvh FILE is required (the clip that drives the body)")
@@ -292,8 +295,8 @@ def _cmd_synth(args: argparse.Namespace) -> None:
 
 def _cmd_track(args: argparse.Namespace) -> None:
     from recon.workspace import Workspace
-    from tracking.track_step import TrackStepConfig, track_workspace
-    from tracking.tracker import TrackConfig
+    from tracking.track.step import TrackStepConfig, track_workspace
+    from tracking.track.tracker import TrackConfig
 
     step, config = config_from_args(TrackStepConfig, args), config_from_args(TrackConfig, args)
     ws = Workspace.open_video(args.workspace)
@@ -344,18 +347,19 @@ def build_parser() -> argparse.ArgumentParser:
     from recon.calibration.compare import CompareConfig
     from recon.calibration.experiment import KruppaNoiseConfig
     from recon.demo import DemoConfig
-    from recon.mvs import DenseConfig, MeshConfig
-    from recon.sfm import SfMConfig
-    from tracking.export import BodyExportConfig
-    from tracking.fit import FitConfig
-    from tracking.fit_cloud import SubjectConfig
-    from tracking.hull import HullCheckConfig
-    from tracking.report import ReportConfig
-    from tracking.silhouette import SilhouetteConfig
-    from tracking.silhouettes_step import SilhouettesConfig
-    from tracking.synth import SynthConfig
-    from tracking.track_step import TrackStepConfig
-    from tracking.tracker import TrackConfig
+    from recon.dense.step import DenseConfig
+    from recon.mesh.step import MeshConfig
+    from recon.sfm.pipeline import SfMConfig
+    from tracking.body.export import BodyExportConfig
+    from tracking.fit.body_fit import FitConfig
+    from tracking.fit.step import SubjectConfig
+    from tracking.report.step import ReportConfig
+    from tracking.rig.synth import SynthConfig
+    from tracking.silhouettes.hull import HullCheckConfig
+    from tracking.silhouettes.step import SilhouettesConfig
+    from tracking.silhouettes.subtraction import SilhouetteConfig
+    from tracking.track.step import TrackStepConfig
+    from tracking.track.tracker import TrackConfig
 
     parser = argparse.ArgumentParser(
         prog="mocap",

@@ -1,6 +1,6 @@
 """`mocap demo`: photos of a synthetic scene with known cameras → the pipeline → errors vs truth.
 
-Needs no download: the scene is rendered here (:mod:`recon.synthetic`).
+Needs no download: the scene is rendered here (:mod:`recon.evaluation.synthetic_room`).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import pycolmap
 
-from recon.sfm import SfMConfig, SfMSummary, cams_from_world, run_sfm
+from recon.sfm.pipeline import SfMConfig, SfMSummary, cams_from_world, run_sfm
 from recon.workspace import Workspace, atomic_output, write_json_atomic
 
 
@@ -98,7 +98,7 @@ def make_scene(config: DemoConfig) -> tuple[Path, Path, bool]:
 
     Returns the images folder, the truth file, and whether the scene was (re)rendered.
     """
-    from recon.synthetic import SyntheticSceneConfig, render_scene, write_scene
+    from recon.evaluation.synthetic_room import SyntheticSceneConfig, render_scene, write_scene
 
     scene_dir = config.out / "scene"
     settings = {"num_views": config.num_views, "seed": config.seed, "format": 1}
@@ -121,9 +121,13 @@ def score_mesh(ws: Workspace, config: DemoConfig, estimated: dict[str, np.ndarra
     Also renders the aligned mesh to WS/mesh/preview.png."""
     import open3d as o3d
 
-    from recon.evaluation import camera_center, umeyama_sim3
-    from recon.mesh_metrics import render_mesh_png, surface_scores
-    from recon.synthetic import SyntheticSceneConfig, render_scene, visible_surface_points
+    from recon.evaluation.surface import render_mesh_png, surface_scores
+    from recon.evaluation.synthetic_room import (
+        SyntheticSceneConfig,
+        render_scene,
+        visible_surface_points,
+    )
+    from recon.evaluation.truth import camera_center, umeyama_sim3
 
     scene = render_scene(SyntheticSceneConfig(num_views=config.num_views, seed=config.seed))
     truth_points = visible_surface_points(scene)
@@ -166,8 +170,9 @@ def run_demo(
     *,
     overwrite: bool = False,
 ) -> DemoReport:
-    from recon.evaluation import focal_error, pose_errors, read_truth
-    from recon.mvs import DenseConfig, MeshConfig, densify, make_mesh
+    from recon.dense.step import DenseConfig, densify
+    from recon.evaluation.truth import focal_error, pose_errors, read_truth
+    from recon.mesh.step import MeshConfig, make_mesh
 
     images, truth_path, rendered = make_scene(config)
     ws, _ = Workspace.create(config.out, images, overwrite=rendered or overwrite)

@@ -220,7 +220,7 @@ def _fmt(value: object) -> str:
     return f"{value:.4g}" if isinstance(value, float) else str(value)
 
 
-# Motion over frames (tracking.report). Timelines shared with the tracking recording: ``frame``
+# Motion over frames (tracking.report.step). Timelines shared with the tracking recording: ``frame``
 # (sequence: the frame number) and ``time`` (duration: frame number / frame rate, seconds).
 FRAME_TIMELINE = "frame"
 TIME_TIMELINE = "time"

@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from recon.errors import UserError
-from recon.images import IMAGE_SUFFIXES, scan_images
+from recon.sfm.images import IMAGE_SUFFIXES, scan_images
 
 RUN_FORMAT = "mocap-workspace-v1"
 
@@ -180,7 +180,7 @@ class Workspace:
     # Video (tracking) workspaces ----------------------------------------------------------
     @property
     def cameras_path(self) -> Path:
-        """Calibrated cameras of a video workspace (`tracking.cameras` JSON)."""
+        """Calibrated cameras of a video workspace (`tracking.rig.cameras` JSON)."""
         return self.root / "cameras.json"
 
     @property

@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import Any
 
 from recon.errors import UserError
-from recon.evaluation import GroundTruth, load_ground_truth
-from recon.images import exif_focal_px
-from recon.sfm import (
+from recon.evaluation.truth import GroundTruth, load_ground_truth
+from recon.sfm.images import exif_focal_px
+from recon.sfm.pipeline import (
     SfMConfig,
     extract_features,
     initialise_intrinsics,

@@ -49,7 +49,7 @@ The F estimators (measured: σ = 1 px, tilted scene, 2000 trials for each of see
 ----------------------------------------------------------------------------------------------
 - ``8-point``: Hartley-normalised 8-point on all points (OpenCV ``FM_8POINT``): 4.6%,
   +0.3…+0.5%, 0.67…0.87%. 0.2 ms per trial.
-- ``lmeds-refit``: the pipeline's :func:`~recon.calibration.initialiser.refit_fundamental`
+- ``lmeds-refit``: the pipeline's :func:`~recon.calibration.kruppa_initialiser.refit_fundamental`
   (LMedS, then 8-point on its inliers): 5.1…5.2%, +0.4…+0.65%, 0.70…0.85%; 4.5 ms. Without
   outliers LMedS only discards good points.
 - ``sampson`` (default): 8-point, then the rank-2 F minimising the Sampson distances in pixels
@@ -77,8 +77,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from recon.calibration.initialiser import refit_fundamental
 from recon.calibration.kruppa import KruppaConfig, PairStatus, focal_from_fundamental
+from recon.calibration.kruppa_initialiser import refit_fundamental
 from recon.workspace import atomic_output, write_json_atomic
 
 __all__ = [

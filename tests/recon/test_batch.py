@@ -29,15 +29,16 @@ from recon.batch import (
     run_batch,
     run_workspace,
 )
+from recon.dense.step import DenseConfig
 from recon.errors import UserError
-from recon.mvs import DenseConfig, MeshConfig
-from recon.sfm import SfMConfig, cams_from_world
-from recon.synthetic import SyntheticSceneConfig, render_scene, write_scene
+from recon.evaluation.synthetic_room import SyntheticSceneConfig, render_scene, write_scene
+from recon.mesh.step import MeshConfig
+from recon.sfm.pipeline import SfMConfig, cams_from_world
 from recon.workspace import Workspace
 from tests.helpers import run_cli, shared_dataset
-from tracking.silhouettes_step import SilhouettesConfig
-from tracking.synth import SynthConfig, synthesize
-from tracking.tracker import TrackConfig
+from tracking.rig.synth import SynthConfig, synthesize
+from tracking.silhouettes.step import SilhouettesConfig
+from tracking.track.tracker import TrackConfig
 
 SFM = SfMConfig(num_threads=1, seed=0, max_image_size=320, max_num_features=2000)
 DENSE = DenseConfig(dense_max_image_size=320, num_threads=1)
@@ -233,9 +234,9 @@ def test_silhouettes_per_camera_and_frames_on_dask_equal_a_serial_run(cluster, t
     very masks (PNG bytes) and summary of the serial step."""
     from distributed import Client, get_task_stream
 
-    from tests.tracking.test_video import make_ball_scene
-    from tracking.silhouettes_step import frame_chunks
-    from tracking.video import init_video
+    from tests.tracking.rig.test_video import make_ball_scene
+    from tracking.rig.video import init_video
+    from tracking.silhouettes.step import frame_chunks
 
     cameras, frames = 3, 30
     videos, calibration, photos, _ = make_ball_scene(tmp_path / "scene", cameras=cameras,

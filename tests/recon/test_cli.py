@@ -111,7 +111,7 @@ def test_dense_and_mesh_need_their_inputs(tmp_path):
 def test_colmap_patchmatch_without_cuda_names_the_cpu_backend():
     import pycolmap
 
-    from recon.backends import ColmapPatchMatchBackend
+    from recon.dense.backends import ColmapPatchMatchBackend
     from recon.errors import UserError
 
     if pycolmap.has_cuda:

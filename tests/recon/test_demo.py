@@ -46,7 +46,7 @@ def test_demo_recovers_the_known_cameras_and_surfaces(tmp_path):
 
 def test_sequential_matching_on_the_demo_scene(tmp_path):
     from recon.demo import DemoConfig, run_demo
-    from recon.sfm import Matcher, SfMConfig
+    from recon.sfm.pipeline import Matcher, SfMConfig
 
     config = SfMConfig(matcher=Matcher.SEQUENTIAL, sequential_overlap=3, max_image_size=480)
     report = run_demo(DemoConfig(out=tmp_path / "demo", num_views=8, mesh=False), config)
@@ -61,7 +61,7 @@ def test_sequential_matching_on_the_demo_scene(tmp_path):
 def test_thesis_front_end_with_kruppa_on_the_demo_scene(tmp_path):
     """Harris corners + NCC + robust F into COLMAP's database, Kruppa focal, then mapping."""
     from recon.demo import DemoConfig, run_demo
-    from recon.sfm import FrontEnd, Matcher, SfMConfig
+    from recon.sfm.pipeline import FrontEnd, Matcher, SfMConfig
 
     # One thread and a fixed seed: COLMAP's multi-threaded RANSAC varies run to run, and this
     # test once failed under load (full suite) while passing alone.

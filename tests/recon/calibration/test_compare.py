@@ -8,7 +8,7 @@ import pytest
 
 from recon.calibration.compare import CompareConfig, compare_intrinsics
 from recon.demo import DemoConfig, make_scene
-from recon.sfm import SfMConfig, run_sfm
+from recon.sfm.pipeline import SfMConfig, run_sfm
 from recon.workspace import Workspace
 from tests.helpers import recording_entities, run_cli, shared_dataset
 
@@ -126,9 +126,9 @@ def test_kruppa_falls_back_when_every_pair_is_singular(tmp_path):
     """pycolmap's synthetic cameras all aim at the scene centre: no pair determines f. The
     initialiser must say so and fall back to COLMAP's default (refined), and mapping still
     recovers the focal."""
-    from recon.sfm import initialise_intrinsics, map_sparse
-    from tests.recon.test_sfm import TRUE_FOCAL as SYNTHETIC_FOCAL
-    from tests.recon.test_sfm import _synthetic_workspace
+    from recon.sfm.pipeline import initialise_intrinsics, map_sparse
+    from tests.recon.sfm.test_pipeline import TRUE_FOCAL as SYNTHETIC_FOCAL
+    from tests.recon.sfm.test_pipeline import _synthetic_workspace
 
     ws, _ = _synthetic_workspace(tmp_path)
     config = SfMConfig(intrinsics="kruppa", intrinsics_options=("refine=false",), num_threads=1)

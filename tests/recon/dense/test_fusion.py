@@ -10,7 +10,13 @@ import pytest
 
 from recon.dense.fusion import FusionConfig, filter_consistent, fuse
 from recon.dense.stereo import DepthMap, StereoConfig, View, compute_depth_maps, select_pairs
-from recon.synthetic import ROOM_MAX, ROOM_MIN, SyntheticSceneConfig, render_scene, scene_quads
+from recon.evaluation.synthetic_room import (
+    ROOM_MAX,
+    ROOM_MIN,
+    SyntheticSceneConfig,
+    render_scene,
+    scene_quads,
+)
 from tests.recon.dense.test_stereo import Truth, depth_seen, distance_to_scene, scene_truths
 
 # The room's diagonal, metres: the "scene extent" of the accuracy criteria.

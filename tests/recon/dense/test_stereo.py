@@ -22,7 +22,7 @@ from recon.dense.stereo import (
     depths_from_pair,
     select_pairs,
 )
-from recon.synthetic import (
+from recon.evaluation.synthetic_room import (
     SyntheticScene,
     SyntheticSceneConfig,
     render_scene,

@@ -1,0 +1,1 @@
+"""Scoring against truth: ground-truth cameras, pose and surface errors, the synthetic room."""

@@ -1,0 +1,1 @@
+"""Meshing: an oriented dense cloud → a cleaned, coloured triangle mesh (PLY, OBJ, GLB)."""

@@ -1,0 +1,1 @@
+"""Structure from motion: photos, features and matches, mapping and bundle adjustment."""

@@ -1,0 +1,272 @@
+"""Tests of tracking.report.step and `mocap report`: a synthetic tracking workspace with gaps, a CMU
+BVH clip round trip, and bad input."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from dataclasses import fields
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from recon.errors import UserError
+from tests.helpers import recording_entities, run_cli, shared_dataset
+from tracking.body.bvh import CMU_METRES_PER_UNIT, read_bvh
+from tracking.body.model import (
+    LOWER_LIMITS,
+    N_POSE_PARAMS,
+    PARAM_INDEX,
+    UPPER_LIMITS,
+    BodyShape,
+)
+from tracking.body.retarget import cmu_node_positions
+from tracking.report.step import ReportConfig, report_from_bvh, report_from_workspace
+
+SHAPE = BodyShape.default(1.70)
+FPS = 30.0
+N = 90
+VELOCITY = np.array([0.1, 0.0, 1.2])  # pelvis, m/s: straight and constant, so filtering keeps it
+
+
+def walking_params(n: int = N) -> np.ndarray:
+    """(n, 24) a gait-like synthetic motion: 1 Hz leg and arm swing, pelvis moving at VELOCITY."""
+    t = np.arange(n) / FPS
+    swing = np.sin(2 * np.pi * t)
+    p = np.zeros((n, N_POSE_PARAMS))
+    p[:, PARAM_INDEX["root_tx"]] = 0.3 + VELOCITY[0] * t
+    p[:, PARAM_INDEX["root_ty"]] = SHAPE.hip_height
+    p[:, PARAM_INDEX["root_tz"]] = VELOCITY[2] * t
+    p[:, PARAM_INDEX["l_hip_rx"]] = -0.35 * swing
+    p[:, PARAM_INDEX["r_hip_rx"]] = 0.35 * swing
+    p[:, PARAM_INDEX["l_knee_flex"]] = 0.6 + 0.5 * swing
+    p[:, PARAM_INDEX["r_knee_flex"]] = 0.6 - 0.5 * swing
+    p[:, PARAM_INDEX["l_shoulder_rx"]] = 0.3 * swing
+    p[:, PARAM_INDEX["r_elbow_flex"]] = 0.4
+    return p
+
+
+def write_pose_track(ws: Path, params: np.ndarray, skip: range = range(0),
+                     lost: range = range(0)) -> Path:  # fmt: skip
+    """WS/tracks/pose.json in the format `read_pose_track` documents."""
+    frames = [{"frame": k, "params": None if k in lost else params[k].tolist()}
+              for k in range(len(params)) if k not in skip]  # fmt: skip
+    data = {"frame_rate": FPS,
+            "shape": {f.name: getattr(SHAPE, f.name) for f in fields(BodyShape)},
+            "frames": frames}  # fmt: skip
+    path = ws / "tracks" / "pose.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(data))
+    return path
+
+
+def read_rows(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.fixture(scope="module")
+def workspace_report(tmp_path_factory: pytest.TempPathFactory):
+    ws = tmp_path_factory.mktemp("ws")
+    # Frames 20-21 lost (0.07 s: interpolated), frames 50-59 absent (0.33 s: left as a gap).
+    write_pose_track(ws, walking_params(), skip=range(50, 60), lost=range(20, 22))
+    return ws, report_from_workspace(ws, ReportConfig())
+
+
+def test_workspace_report_writes_every_output(workspace_report) -> None:
+    ws, result = workspace_report
+    report = ws / "report"
+    assert result.report_dir == report and result.recording == ws / "logs" / "report.rrd"
+    for name in ("index.html", "joint_angles.csv", "center_of_mass.csv", "joint_moments.csv",
+                 "joint_forces.csv", "segment_angular_velocity.csv", "motion.trc",
+                 "summary.json", "joint_angles.png", "center_of_mass.png",
+                 "joint_moments.png", "joint_angular_velocity.png"):
+        assert (report / name).is_file(), name
+    assert not (report / "report.rrd").exists() and not (ws / "report.partial").exists()
+    page = (report / "index.html").read_text()
+    for needle in ("<img src='joint_angles.png'", "de Leva", "Ground reaction forces are "
+                   "unknown", "6 Hz"):
+        assert needle in page, needle
+    assert json.loads((ws / "run.json").read_text())["steps"]["report"]["summary"]["frames"] == N
+
+
+def test_csvs_are_tidy_and_leave_long_gaps_empty(workspace_report) -> None:
+    ws, _ = workspace_report
+    report = ws / "report"
+    header = (report / "joint_angles.csv").read_text().splitlines()[0]
+    assert header == "frame,time_s,joint,angle,degrees"
+    assert (report / "center_of_mass.csv").read_text().splitlines()[0] == "frame,time_s,x,y,z"
+    angles = read_rows(report / "joint_angles.csv")
+    frames = {int(r["frame"]) for r in angles}
+    assert frames == set(range(N)) - set(range(50, 60))  # the short gap is filled
+    assert {r["angle"] for r in angles} == {"flexion", "abduction", "rotation"}
+    knee = {int(r["frame"]): float(r["degrees"]) for r in angles
+            if r["joint"] == "l_knee" and r["angle"] == "flexion"}  # fmt: skip
+    truth = np.degrees(walking_params()[:, PARAM_INDEX["l_knee_flex"]])
+    # 1 Hz motion through a 6 Hz low-pass: within 0.5 degree; the two interpolated frames (an
+    # arc replaced by a chord) within 1.5 degrees.
+    assert max(abs(knee[k] - truth[k]) for k in knee if k not in (20, 21)) < 0.5
+    assert max(abs(knee[k] - truth[k]) for k in (20, 21)) < 1.5
+    # Joint centres are in the input's own world axes: the pelvis follows the root translation.
+    pelvis = np.array([[float(r[a]) for a in "xyz"]
+                       for r in read_rows(report / "joint_positions.csv")
+                       if r["joint"] == "pelvis"])
+    expected = walking_params()[:, [PARAM_INDEX[f"root_t{a}"] for a in "xyz"]]
+    np.testing.assert_allclose(pelvis, np.delete(expected, range(50, 60), axis=0), atol=1e-5)
+    gaps = read_rows(report / "gaps.csv")
+    assert [(g["first_frame"], g["last_frame"], g["filled"]) for g in gaps] == [
+        ("20", "21", "true"), ("50", "59", "false")]
+
+
+def test_com_and_trc_are_in_metres_in_the_world_axes(workspace_report) -> None:
+    ws, result = workspace_report
+    report = ws / "report"
+    com = read_rows(report / "center_of_mass.csv")
+    height = np.array([float(r["y"]) for r in com])
+    # Standing height centre of mass sits at about 55% of the body height, Y up.
+    assert np.all(np.abs(height / SHAPE.height - 0.55) < 0.05)
+    speed = result.summary["center_of_mass"]["mean_horizontal_speed_m_s"]
+    assert speed == pytest.approx(np.hypot(VELOCITY[0], VELOCITY[2]), rel=0.05)
+    lines = (report / "motion.trc").read_text().splitlines()
+    assert lines[0].startswith("PathFileType\t4\t(X/Y/Z)\tmotion.trc")
+    assert lines[2].split("\t")[:5] == ["30", "30", str(N), "16", "m"]
+    assert lines[3].split("\t")[:3] == ["Frame#", "Time", "pelvis"]
+    data = lines[6:]
+    assert len(data) == N
+    assert data[55].split("\t")[2:] == [""] * 48  # a frame of the long gap: no invented markers
+    pelvis = [float(v) for v in data[0].split("\t")[2:5]]
+    np.testing.assert_allclose(pelvis, [0.3, SHAPE.hip_height, 0.0], atol=1e-5)
+
+
+def test_recording_has_curves_and_skeleton_on_the_tracking_timelines(workspace_report) -> None:
+    ws, _ = workspace_report
+    entities = recording_entities(ws / "logs" / "report.rrd")
+    for wanted in ("/report/joint_angles/l_knee/flexion@Scalars:scalars",
+                   "/report/center_of_mass/y@Scalars:scalars",
+                   "/report/joint_moments/l_hip/flexion@Scalars:scalars",
+                   "/world/skeleton/joints@Points3D:positions",
+                   "/world/skeleton/bones@LineStrips3D:strips"):
+        assert wanted in entities, wanted
+    # The curves' timelines, as Rerun's own reader shows them: the frame number and seconds.
+    rerun = Path(sys.executable).with_name("rerun")
+    dump = subprocess.run([rerun, "rrd", "print", "-vv", ws / "logs" / "report.rrd"],
+                          capture_output=True, text=True, check=True).stdout  # fmt: skip
+    assert "index_name: frame" in dump and "index_name: time" in dump
+
+
+def test_report_is_reused_until_its_input_or_settings_change(workspace_report) -> None:
+    ws, _ = workspace_report
+    assert report_from_workspace(ws, ReportConfig()).reused
+    again = report_from_workspace(ws, ReportConfig(cutoff_hz=4.0))
+    assert not again.reused and again.summary["cutoff_hz"] == 4.0
+
+
+def test_bad_workspace_inputs_get_one_line_messages(tmp_path: Path) -> None:
+    with pytest.raises(UserError, match=r"tracks/pose.json not found.*mocap track"):
+        report_from_workspace(tmp_path, ReportConfig())
+    write_pose_track(tmp_path, walking_params(6))
+    with pytest.raises(UserError, match="too short.*6 frame.*needs at least 10"):
+        report_from_workspace(tmp_path, ReportConfig())
+    write_pose_track(tmp_path, walking_params(40), lost=range(40))
+    with pytest.raises(UserError, match="no frame with data"):
+        report_from_workspace(tmp_path, ReportConfig())
+    (tmp_path / "tracks" / "pose.json").write_text("{not json")
+    with pytest.raises(UserError, match="not valid JSON"):
+        report_from_workspace(tmp_path, ReportConfig())
+    with pytest.raises(UserError, match="too high for 30 frames/s"):
+        write_pose_track(tmp_path, walking_params(40))
+        report_from_workspace(tmp_path, ReportConfig(cutoff_hz=14.0))
+
+
+def test_cli_reports_a_workspace(tmp_path: Path) -> None:
+    write_pose_track(tmp_path / "ws", walking_params(40))
+    ok = run_cli("report", tmp_path / "ws", "--cutoff-hz", "5", "--plot-format", "svg")
+    assert ok.returncode == 0, ok.stderr
+    assert "cut-off 5 Hz" in ok.stdout and (tmp_path / "ws/report/joint_angles.svg").is_file()
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    ((), "give either a workspace"),
+    (("nothing",), "tracks/pose.json not found"),
+    (("--bvh", "missing.bvh", "--out", "o"), "missing.bvh not found"),
+    (("--bvh", "missing.bvh"), "--bvh needs --out DIR"),
+])  # fmt: skip
+def test_cli_bad_input_gets_one_line_and_exit_2(
+    args: tuple[str, ...], message: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:  # fmt: skip
+    from recon.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["report", *args]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1, err
+
+
+# ---------------------------------------------------------------------------------------------
+# A real CMU clip
+# ---------------------------------------------------------------------------------------------
+
+FRAMES = 60  # 0.5 s of the 120 Hz clip keeps the retargeting to a few seconds
+
+
+@pytest.fixture(scope="module")
+def walk_report(tmp_path_factory: pytest.TempPathFactory):
+    walk = shared_dataset("mocap_bvh") / "cmu_02_01_walk.bvh"
+    out = tmp_path_factory.mktemp("walk")
+    return walk, report_from_bvh(walk, out, ReportConfig(max_frames=FRAMES))
+
+
+@pytest.mark.shared_data
+def test_cmu_walk_round_trip_matches_the_clip(walk_report) -> None:
+    walk, result = walk_report
+    report = result.report_dir
+    assert result.recording == report / "report.rrd" and result.recording.is_file()
+    motion = read_bvh(walk)
+    truth = {k: v[:FRAMES] for k, v in cmu_node_positions(motion, CMU_METRES_PER_UNIT).items()}
+    # Knee flexion against the angle between thigh and shank in the clip itself.
+    angles = read_rows(report / "joint_angles.csv")
+    for side in "lr":
+        thigh = truth[f"{side}_hip"] - truth[f"{side}_knee"]
+        shank = truth[f"{side}_ankle"] - truth[f"{side}_knee"]
+        cos = np.sum(thigh * shank, axis=1) / np.linalg.norm(thigh, axis=1) / np.linalg.norm(
+            shank, axis=1)  # fmt: skip
+        clip = 180.0 - np.degrees(np.arccos(cos))
+        ours = np.array([float(r["degrees"]) for r in angles
+                         if r["joint"] == f"{side}_knee" and r["angle"] == "flexion"])
+        # Degrees; the retargeting fits a hinge knee to the clip's 3-DOF one (20 mm RMS).
+        assert np.abs(ours - clip).max() < 6.0, side
+    # The pelvis marker sits at the clip's hip midpoint, in the clip's own (Y-up) world.
+    data = (report / "motion.trc").read_text().splitlines()[6:]
+    pelvis = np.array([[float(v) for v in line.split("\t")[2:5]] for line in data])
+    assert np.linalg.norm(pelvis - truth["pelvis"], axis=1).max() < 0.03  # metres
+
+
+@pytest.mark.shared_data
+def test_cmu_walk_angles_stay_within_the_joint_limits(walk_report) -> None:
+    _, result = walk_report
+    angles = result.summary["angles"]
+    deg = np.degrees
+
+    def limit(name: str) -> tuple[float, float]:
+        i = PARAM_INDEX[name]
+        return deg(LOWER_LIMITS[i]), deg(UPPER_LIMITS[i])
+
+    tol = 1.0  # degrees: the low-pass may overshoot a limit the retargeting stopped at
+    hinges = {("l_knee", "flexion"): limit("l_knee_flex"), ("r_knee", "flexion"):
+              limit("r_knee_flex"), ("l_elbow", "flexion"): limit("l_elbow_flex"),
+              ("r_elbow", "flexion"): limit("r_elbow_flex"), ("spine", "flexion"):
+              limit("spine_flex"), ("neck", "flexion"): limit("neck_flex")}  # fmt: skip
+    for side in "lr":
+        lo, hi = limit(f"{side}_hip_rx")
+        hinges[(f"{side}_hip", "flexion")] = (-hi, -lo)  # flexion is -rx
+        lo, hi = limit(f"{side}_shoulder_rx")
+        hinges[(f"{side}_shoulder", "flexion")] = (-hi, -lo)
+    for (joint, angle), (lo, hi) in hinges.items():
+        r = angles[joint][angle]
+        assert lo - tol <= r["min"] and r["max"] <= hi + tol, (joint, angle, r, (lo, hi))
+    # Walking: the knees flex well past 30 degrees somewhere in half a second of gait.
+    assert max(angles["l_knee"]["flexion"]["max"], angles["r_knee"]["flexion"]["max"]) > 30

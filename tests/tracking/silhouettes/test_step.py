@@ -1,0 +1,336 @@
+"""`mocap silhouettes` against known masks: synthetic videos of a moving blob, and the Pose2Sim
+demo for plausibility."""
+
+from __future__ import annotations
+
+import hashlib
+import warnings
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from recon.errors import UserError
+from recon.workspace import Workspace
+from tests.helpers import recording_entities, run_cli, shared_dataset
+from tests.tracking.rig.test_video import (
+    FRAMES,
+    HEIGHT,
+    WIDTH,
+    digest,
+    make_ball_scene,
+    make_blob_scene,
+)
+from tracking.rig.cameras import Camera, read_cameras
+from tracking.rig.video import init_video
+from tracking.silhouettes.hull import HullCheckConfig
+from tracking.silhouettes.step import (
+    SilhouettesConfig,
+    _free_median,
+    background_images,
+    frame_chunks,
+    make_silhouettes,
+    median_background,
+    summary_lines,
+)
+from tracking.silhouettes.subtraction import BackgroundModel
+
+
+@pytest.fixture(scope="module")
+def blob_workspace(tmp_path_factory: pytest.TempPathFactory):
+    folder = tmp_path_factory.mktemp("blob")
+    videos, calibration, truth = make_blob_scene(folder)
+    return init_video(folder / "ws", videos, calibration), videos, truth
+
+
+# The blob scene draws an ellipse in each camera's image with no 3D object behind it: the
+# multi-view check, which keeps what the cameras agree on in 3D, is off for it.
+NO_CHECK = HullCheckConfig(multi_view_check=False)
+
+
+def read_mask(path: Path) -> np.ndarray:
+    mask = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    assert mask is not None and mask.dtype == np.uint8 and mask.ndim == 2, path
+    assert set(np.unique(mask)) <= {0, 255}
+    return mask > 0
+
+
+def iou(a: np.ndarray, b: np.ndarray) -> float:
+    return float((a & b).sum() / max((a | b).sum(), 1))
+
+
+def test_median_background_equals_from_sequence():
+    rng = np.random.default_rng(3)
+    frames = [rng.integers(0, 256, (17, 23, 3), dtype=np.uint8) for _ in range(9)]
+    frames[4][:5] = 255  # something passing through
+    ours = median_background(frames, passes=1)
+    reference = BackgroundModel.from_sequence(frames)
+    np.testing.assert_array_equal(ours.mean, reference.mean)
+    np.testing.assert_allclose(ours.std, reference.std, rtol=1e-6)
+    with pytest.raises(ValueError, match="odd"):
+        median_background(frames[:8])
+
+
+def test_second_background_pass_leaves_out_the_subject():
+    # A subject of changing colour stands on the left half in 8 of 21 frames: its colours
+    # inflate the first pass's spread there (so faint parts of it would pass as background);
+    # the second pass takes the median and spread over the frames where it is absent.
+    rng = np.random.default_rng(5)
+    frames = []
+    for k in range(21):
+        frame = np.clip(rng.normal(100, 2, (40, 60, 3)), 0, 255).astype(np.uint8)
+        if k % 5 in (0, 2):
+            frame[5:35, 5:30] = rng.integers(140, 250, 3).astype(np.uint8)
+        frames.append(frame)
+    one = median_background(frames, passes=1)
+    two = median_background(frames, passes=2)
+    spot, clear = (slice(10, 30), slice(10, 25)), (slice(10, 30), slice(40, 55))
+    assert np.median(one.std[spot]) > 1.5 * np.median(one.std[clear])
+    assert np.median(two.std[spot]) < 1.25 * np.median(two.std[clear])
+    np.testing.assert_allclose(np.median(two.mean[spot]), 100, atol=1.5)
+    # Where nothing passed, the second pass changes nothing of note.
+    np.testing.assert_allclose(two.std[clear], one.std[clear], rtol=0.35, atol=0.5)
+
+
+def test_free_median_is_the_median_over_the_free_frames():
+    rng = np.random.default_rng(8)
+    frames = [rng.integers(0, 256, (7, 9, 3), dtype=np.uint8) for _ in range(9)]
+    free = rng.random((9, 7, 9)) < 0.6
+    previous = median_background(frames, passes=1)
+    got = _free_median(frames, free, previous)
+    stack = np.stack(frames).astype(float)
+    stack[~free] = np.nan
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        median = np.nanmedian(stack, axis=0)
+        mad = np.nanmedian(np.abs(stack - median[None]), axis=0)
+    enough = free.sum(axis=0) >= 9 // 4
+    np.testing.assert_allclose(got.mean[enough], median[enough])
+    np.testing.assert_allclose(got.std[enough], 1.4826 * mad[enough], rtol=1e-5)
+    np.testing.assert_array_equal(got.mean[~enough], previous.mean[~enough])
+
+
+def test_silhouettes_of_a_moving_blob_match_the_truth(blob_workspace):
+    ws, videos, truth = blob_workspace
+    before = digest(videos)
+    record = make_silhouettes(ws, SilhouettesConfig(hull=NO_CHECK))
+    assert digest(videos) == before  # the inputs are only read
+    for k, masks in enumerate(truth):
+        folder = ws.silhouettes_dir / f"cam{k:02d}"
+        assert sorted(p.name for p in folder.iterdir()) == [f"{i:06d}.png" for i in
+                                                            range(FRAMES)]
+        scores = []
+        for i, expected in enumerate(masks):
+            got = read_mask(folder / f"{i:06d}.png")
+            assert got.shape == (HEIGHT, WIDTH)
+            if expected.any():
+                scores.append(iou(got, expected))
+            else:
+                assert not got.any(), f"cam{k:02d} frame {i}: foreground with the blob away"
+        # 1 px of edge error on a 26 x 34 px ellipse costs about 0.07 of IoU.
+        assert np.mean(scores) >= 0.9 and min(scores) >= 0.8, (k, scores)
+        summary = record.summary["cameras"][f"cam{k:02d}"]
+        # The blob is out of view in frames 0, 1, 22, 23 and crosses the border in between.
+        empty = [i for i, m in enumerate(masks) if not m.any()]
+        touching = [i for i, m in enumerate(masks)
+                    if m.any() and (m[:, 0].any() or m[:, -1].any())]
+        assert summary["empty_frames"] == empty == [0, 1, 22, 23]
+        assert summary["border_frames"] == touching
+        true_fraction = np.median([m.mean() for m in masks])
+        assert summary["foreground_fraction"]["median"] == pytest.approx(true_fraction, rel=0.1)
+    assert "cam00: empty silhouette in frame(s) 0-1, 22-23 (subject out of view?)" in (
+        record.summary["warnings"])
+    # Unchanged settings: reused without touching the masks; a changed setting recomputes.
+    stamp = (ws.silhouettes_dir / "cam00" / "000005.png").stat().st_mtime_ns
+    again = make_silhouettes(ws, SilhouettesConfig(hull=NO_CHECK))
+    assert again.fingerprint == record.fingerprint
+    assert (ws.silhouettes_dir / "cam00" / "000005.png").stat().st_mtime_ns == stamp
+    # What `mocap silhouettes` prints says so, not the time of the run it reused.
+    assert "(up to date)" in summary_lines(ws, again)[0]
+    assert "(up to date)" not in summary_lines(ws, record)[0]
+
+
+def test_frame_range_and_empty_background_frames(blob_workspace, tmp_path: Path):
+    ws, _, truth = blob_workspace
+    # Frames 0-1 show the empty scene: the thesis' mean-and-deviation background.
+    config = SilhouettesConfig(background="frames:0-1", first=4, last=16, frame_step=4,
+                               logged_frames=0, hull=NO_CHECK)
+    record = make_silhouettes(ws, config)
+    assert sorted(p.name for p in (ws.silhouettes_dir / "cam01").iterdir()) == [
+        "000004.png", "000008.png", "000012.png", "000016.png"]
+    assert record.summary["processed"] == 4 and record.summary["frames"] == [4, 16, 4]
+    for i in (4, 8, 12, 16):
+        assert iou(read_mask(ws.silhouettes_dir / "cam01" / f"{i:06d}.png"),
+                   truth[1][i]) >= 0.85
+    with pytest.raises(UserError, match="past the last frame 23"):
+        make_silhouettes(ws, SilhouettesConfig(last=30))
+    with pytest.raises(UserError, match="frames:A-B"):
+        SilhouettesConfig(background="empty")
+    with pytest.raises(UserError, match="not a video workspace"):
+        make_silhouettes(Workspace(tmp_path), SilhouettesConfig())
+
+
+def test_background_photos_recover_a_subject_who_stays_put(tmp_path: Path):
+    """A ball wobbling about one spot is part of its video's median; each camera's photo of the
+    empty scene (5% darker) replaces the median where it moved, but not where the photo shows
+    what the video never does (a blue block in cam00's); the multi-view check removes the light
+    that flashes in cam00's video alone."""
+    videos, calibration, photos, truth = make_ball_scene(tmp_path / "scene")
+    ws = init_video(tmp_path / "ws", videos, calibration)
+    before = digest(photos)
+
+    def scores(record) -> list[float]:
+        means = []
+        for k, masks in enumerate(truth):
+            folder = ws.silhouettes_dir / f"cam{k:02d}"
+            means.append(float(np.mean([iou(read_mask(folder / f"{i:06d}.png"), m)
+                                        for i, m in enumerate(masks)])))
+        return means
+
+    median = scores(make_silhouettes(ws, SilhouettesConfig()))
+    assert max(median) < 0.4  # the median alone loses the ball's core
+    record = make_silhouettes(ws, SilhouettesConfig(background_images=photos))
+    assert digest(photos) == before  # only read
+    with_photos = scores(record)
+    # In cam00 the block's pixels next to the ball have no background to trust (the photo
+    # shows the block, the median the ball): unknown, and the mask there follows the median.
+    assert min(with_photos[1:]) >= 0.92 and with_photos[0] >= 0.88, with_photos
+    for name, camera in record.summary["cameras"].items():
+        photo = camera["background_image"]
+        assert photo["image"] == f"{name}_ext.png" and 0.05 < photo["area"] < 0.3
+        assert (photo["unknown"] > 0.002) == (name == "cam00")  # the block
+        unknown = ws.silhouettes_dir / name / "unknown.png"
+        assert unknown.exists() == (name == "cam00")
+        assert photo["gain"] == pytest.approx([1 / 0.95] * 3, rel=0.02)  # the exposure
+        assert photo["agreement"] > 0.9
+    block = read_mask(ws.silhouettes_dir / "cam00" / "unknown.png")
+    assert block.mean() == pytest.approx(record.summary["cameras"]["cam00"]["background_image"][
+        "unknown"]) and block[HEIGHT // 2, WIDTH // 2 + 30]
+    assert any(e.startswith("/backgrounds/cam00/unknown")
+               for e in recording_entities(ws.logs_dir / "silhouettes.rrd"))
+    assert record.summary["cameras"]["cam01"]["hull_removed"]["max"] < 0.01
+    assert record.summary["cameras"]["cam00"]["hull_removed"]["max"] > 0.3  # the light
+    mask = read_mask(ws.silhouettes_dir / "cam00" / "000003.png")
+    assert not mask[HEIGHT - 25:HEIGHT - 5, 20:60].any()
+    off = scores(make_silhouettes(ws, SilhouettesConfig(background_images=photos,
+                                                        hull=NO_CHECK)))
+    assert off[0] < with_photos[0] - 0.05 and off[1:] == pytest.approx(with_photos[1:])
+    # A photo that is not of the camera's view (upside down here) is not used, with a warning.
+    wrong = tmp_path / "wrong"
+    wrong.mkdir()
+    for k in range(len(truth)):
+        photo = cv2.imread(str(photos / f"cam{k:02d}_ext.png"))
+        cv2.imwrite(str(wrong / f"cam{k:02d}.png"), photo[::-1, ::-1])
+    record = make_silhouettes(ws, SilhouettesConfig(background_images=wrong))
+    assert record.summary["cameras"]["cam00"]["background_image"]["gain"] is None
+    assert any(w.startswith("cam00: background image cam00.png agrees with the video on only")
+               for w in record.summary["warnings"])
+    # Bad input: one-line errors.
+    with pytest.raises(UserError, match="no such folder"):
+        make_silhouettes(ws, SilhouettesConfig(background_images=tmp_path / "nothing"))
+    with pytest.raises(UserError, match="no image names a camera"):
+        make_silhouettes(ws, SilhouettesConfig(background_images=videos))
+    with pytest.raises(UserError, match="completes the median background"):
+        SilhouettesConfig(background="frames:0-3", background_images=photos)
+
+
+def test_background_images_name_their_camera_as_a_word(tmp_path: Path):
+    # Case and separators do not count (Pose2Sim's Calib.toml names cameras cam_01, its
+    # photos are cam01_ext.png); another camera whose name continues the word does not match.
+    for name in ("cam01_ext.png", "CAM-02 photo.jpg", "cam010_ext.png", "notes.txt"):
+        (tmp_path / name).write_bytes(b"")
+    cams = [Camera(n, 640, 480, np.eye(3), np.column_stack([np.eye(3), np.zeros(3)]))
+            for n in ("cam_01", "cam02", "cam1")]
+    found = background_images(tmp_path, cams)
+    assert {k: v.name for k, v in found.items()} == {"cam_01": "cam01_ext.png",
+                                                      "cam02": "CAM-02 photo.jpg"}
+    (tmp_path / "cam_02_ext.png").write_bytes(b"")
+    with pytest.raises(UserError, match="2 images name camera cam02"):
+        background_images(tmp_path, cams)
+
+
+def test_frame_chunks_split_frames_into_runs_and_bound_the_redecoding():
+    """`mocap batch` classifies a camera's frames in runs; a run re-decodes the video up to its
+    first frame, so long sequences get fewer, longer runs: at most 4 frames decoded again per
+    processed one (a run starting at frame s decodes s frames before it; the serial loop does
+    that once, for the first run)."""
+    for frames in (list(range(100)), list(range(3000)), list(range(0, 3000, 2)), [7],
+                   list(range(24))):
+        runs = frame_chunks(frames)
+        assert [f for run in runs for f in run] == frames  # consecutive, in order, all
+        assert max(map(len, runs)) - min(map(len, runs)) <= 1
+        assert sum(run[0] for run in runs[1:]) <= 4 * len(frames)
+    assert sorted(len(r) for r in frame_chunks(list(range(100)))) == [11] * 8 + [12]
+    assert len(frame_chunks(list(range(24)))) == 2  # 12 frames a run when that is affordable
+    assert len(frame_chunks(list(range(3000)))) == 9  # ~333 a run, not 250 runs of 12
+    assert len(frame_chunks(list(range(0, 3000, 2)))) == 5  # every other frame: 5 runs
+    # Every 10th frame: a second run would decode 1505 frames again for 300 processed ones.
+    assert len(frame_chunks(list(range(5, 3000, 10)))) == 1
+    assert frame_chunks([]) == []
+
+
+def test_the_cli_reports_frames_without_subject_and_records_them(tmp_path: Path):
+    videos, calibration, _ = make_blob_scene(tmp_path / "scene", cameras=2,
+                                             suffixes=(".avi",))
+    ws = tmp_path / "ws"
+    result = run_cli("init-video", ws, "--videos", videos, "--calibration", calibration)
+    assert result.returncode == 0, result.stderr
+    result = run_cli("silhouettes", ws, "--logged-frames", "2", "--min-area", "80",
+                     "--no-multi-view-check")
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith(f"silhouettes  2 cameras x {FRAMES} frames (0-{FRAMES - 1})")
+    assert "warning      cam01: empty silhouette in frame(s) 0-1, 22-23 " \
+        "(subject out of view?)" in lines
+    assert any(line.startswith("warning      cam00: silhouette touches the image border")
+               for line in lines)
+    assert Workspace(ws).step("silhouettes").config["thresholds"]["min_area"] == 80
+    entities = recording_entities(ws / "logs" / "silhouettes.rrd")
+    for needed in ("/world/cameras/cam00/image@Pinhole",
+                   "/world/cameras/cam00/image@EncodedImage",
+                   "/world/cameras/cam01/image/silhouette@SegmentationImage",
+                   "/silhouettes/cam01/foreground_fraction@Scalars"):
+        assert any(e.startswith(needed) for e in entities), (needed, sorted(entities))
+    assert not list((ws / "logs").glob("*partial*"))
+    # An empty-silhouette-in-every-frame workspace gets its own clear warning.
+    result = run_cli("silhouettes", ws, "--first", "0", "--last", "1", "--no-multi-view-check")
+    assert result.returncode == 0 and "every silhouette is empty" in result.stdout
+
+
+@pytest.mark.shared_data
+def test_silhouettes_of_the_pose2sim_demo_are_one_person(tmp_path: Path):
+    """No empty background exists: the temporal median. 4 frames per camera, 11 background
+    samples; the person covers a few percent of each portrait frame."""
+    demo = shared_dataset("pose2sim_demo")
+    before = {p.name: hashlib.sha256(p.read_bytes()).hexdigest()
+              for p in (demo / "videos").iterdir()}
+    ws = init_video(tmp_path / "ws", demo / "videos", demo / "calibration" / "Calib.qca.txt")
+    config = SilhouettesConfig(first=0, last=99, frame_step=33, background_samples=11,
+                               logged_frames=1)
+    record = make_silhouettes(ws, config)
+    for name, summary in record.summary["cameras"].items():
+        assert summary["frames"] == 4
+        assert 0.01 <= summary["foreground_fraction"]["median"] <= 0.4, name
+        assert summary["empty_frames"] == []
+    # The four views agree on one body: the median pixels of the silhouettes triangulate to a
+    # point 0.6-1.2 m above the lab floor (Z up; the pelvis of a standing adult) that projects
+    # within 200 px of each of them (ghosts of other poses pull a median by up to ~120 px; a
+    # camera paired with the wrong video misses by far more).
+    cameras = read_cameras(ws.cameras_path)
+    for index in (0, 33, 66, 99):
+        rows, pixels = [], []
+        for cam in cameras:
+            ys, xs = np.nonzero(read_mask(ws.silhouettes_dir / cam.name / f"{index:06d}.png"))
+            uv = np.array([np.median(xs), np.median(ys)]) + 0.5  # pixel centres at +0.5
+            xy = cam.undistort((np.linalg.inv(cam.K) @ [*uv, 1.0])[None, :2])[0]
+            rows += [xy[0] * cam.cam_from_world[2] - cam.cam_from_world[0],
+                     xy[1] * cam.cam_from_world[2] - cam.cam_from_world[1]]
+            pixels.append(uv)
+        homogeneous = np.linalg.svd(np.array(rows))[2][-1]
+        point = homogeneous[:3] / homogeneous[3]
+        assert 0.6 < point[2] < 1.2 and np.hypot(point[0], point[1]) < 2.5, (index, point)
+        for cam, uv in zip(cameras, pixels, strict=True):
+            assert np.linalg.norm(cam.project(point[None])[0][0] - uv) < 200, (index, cam.name)
+    assert {p.name: hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in (demo / "videos").iterdir()} == before

@@ -1,0 +1,550 @@
+"""Fit the articulated body model to a human point cloud: scale and the 24 pose parameters.
+
+Chapter 5 of the thesis leaves "fitting a predefined 3D human skeleton model" to the
+reconstructed cloud as future work; this is it. Pure numpy/scipy, no I/O.
+
+The unknowns are the 24 pose parameters (`tracking.body.model.POSE_LAYOUT`) and two shape scales:
+the height h (every length of `BodyShape.default(h)`) and a girth factor g that multiplies every
+segment radius. The cost is a robust distance from the cloud's points to the posed model
+surface, minimised by ICP: match every point to the nearest point of a dense sample of the model
+surface (a KD-tree), then take damped Gauss-Newton steps for those matches (analytic pose
+derivatives, iteratively reweighted for the robust loss, projected onto the joint limits) on
+point-to-plane distances with a weak point-to-point term, and repeat. Cloud-to-model distances
+drive the fit, so surface the sensor never saw (a cloud from one side) costs nothing there; the
+candidate scores add a trimmed model-to-cloud term so that a limb is not parked in empty space.
+
+Initialisation is automatic (no hand alignment, unlike the thesis), coarse to fine on 400 points:
+
+1. the principal axes of the cloud: the longest is the body's vertical when standing, and its
+   extent sets the search range of the height;
+2. the root (thesis 6.2.5: root first): the trunk alone (pelvis, chest, head) is fitted with a
+   Cauchy loss, so limb points are outliers, from 5 up directions (the longest axis and four
+   tilts of 45 degrees, for folded poses), both signs, times 8 headings, upright or bent;
+3. the limbs, one at a time, for the best distinct trunk orientations: a grid of candidate
+   configurations is scored, the best three are refined on the limb's four parameters, and the
+   lowest cost wins; a second pass after a full ICP lets a limb recover points a misplaced
+   neighbour had taken;
+4. full ICP over all 26 unknowns on all points, keeping the lowest-cost orientation; while the
+   best fit fails the acceptance test below, further orientations are tried.
+
+A fit is declared failed, with its residual, when the median point-to-surface distance exceeds
+`max_median_residual` of the height or fewer than `min_inlier_fraction` of the points lie within
+`inlier_distance` of it, and, for clouds in metres, when the height is not a human one. A
+non-human cloud thus reports a failure rather than a confident wrong answer.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from tracking.body.bvh import rotations_to_channels
+from tracking.body.model import (
+    LOWER_LIMITS,
+    N_POSE_PARAMS,
+    NODE_NAMES,
+    PARAM_INDEX,
+    PARAM_MOVES_NODE,
+    POSE_LAYOUT,
+    UPPER_LIMITS,
+    BodyModel,
+    BodyShape,
+    Pose,
+    forward_kinematics,
+    pose_derivative_axes,
+    segment_specs,
+    superquadric,
+)
+
+# Girth fields of BodyShape: scaled together by the girth factor g.
+GIRTH_FIELDS: tuple[str, ...] = (
+    "pelvis_half_width", "trunk_half_depth", "chest_half_width", "head_half_width",
+    "upper_arm_radius", "forearm_radius", "thigh_radius", "shank_radius",
+)  # fmt: skip
+_H, _G = N_POSE_PARAMS, N_POSE_PARAMS + 1  # indices of h and g in the unknown vector
+_ROOT = [PARAM_INDEX[n] for n in ("root_tx", "root_ty", "root_tz", "root_rz", "root_rx",
+                                  "root_ry")]  # fmt: skip
+# Parameter indices of each whole limb (ball joint then hinge), e.g. "l_arm".
+_LIMBS: dict[str, list[int]] = {}
+for _side in ("l", "r"):
+    for _limb, _joints in (("arm", ("shoulder", "elbow")), ("leg", ("hip", "knee"))):
+        _LIMBS[f"{_side}_{_limb}"] = [
+            i for i, n in enumerate(PARAM_INDEX)
+            if n.split("_")[0] == _side and n.split("_")[1] in _joints
+        ]  # fmt: skip
+
+_TRUNK_NODES = [NODE_NAMES.index(n) for n in ("pelvis", "spine", "neck")]
+# Candidate limb configurations, degrees, in each limb's parameter order (rz, rx, ry, hinge);
+# rz is the left-side abduction, mirrored for the right. A grid over the ball joint's two swing
+# angles, with the hinge straight and bent.
+_ARM_CANDIDATES = tuple(
+    (abd, flex, 0, elbow) for abd in (0, 45, 90, 135) for flex in (0, -45, -90)
+    for elbow in (0, 90)
+)  # fmt: skip
+_LEG_CANDIDATES = tuple(
+    (abd, flex, 0, knee) for abd in (0, 30) for flex in (15, -30, -60, -90) for knee in (0, 70)
+)  # fmt: skip
+_REFINED_CANDIDATES = 3  # per limb, the best pre-scored candidates refined by ICP
+_SPINE_CANDIDATES = (0.0, 45.0)
+
+
+def shape_from_scales(height: float, girth: float) -> BodyShape:
+    """`BodyShape.default(height)` with every girth field multiplied by `girth`."""
+    base = BodyShape.default(height)
+    return replace(base, **{f: girth * getattr(base, f) for f in GIRTH_FIELDS})
+
+
+@dataclass(frozen=True, kw_only=True)
+class FitConfig:
+    max_points: int = field(
+        default=1500, metadata={"help": "points used by the fit (a random subset of the cloud)"}
+    )
+    iterations: int = field(
+        default=10, metadata={"help": "ICP rounds (match, then solve) of the final fit"}
+    )
+    robust_scale: float = field(
+        default=0.006,
+        metadata={"help": "soft-L1 scale of the point-to-surface distance, as a fraction of "
+                  "the height (0.006 = 1 cm for 1.75 m)"},
+    )  # fmt: skip
+    max_median_residual: float = field(
+        default=0.005,
+        metadata={"help": "fail when the median point-to-surface distance exceeds this "
+                  "fraction of the height"},
+    )  # fmt: skip
+    inlier_distance: float = field(
+        default=0.02,
+        metadata={"help": "a point within this fraction of the height of the surface is an "
+                  "inlier"},
+    )  # fmt: skip
+    min_inlier_fraction: float = field(
+        default=0.9, metadata={"help": "fail when fewer points than this are inliers"}
+    )
+    metric: bool = field(
+        default=True,
+        metadata={"help": "the cloud is in metres: a height outside 0.9-2.3 m is a failure "
+                  "(use --no-metric for clouds of unknown scale, e.g. uncalibrated SfM)"},
+    )  # fmt: skip
+    headings: int = field(
+        default=8,
+        metadata={"help": "facing directions tried around the body axis (for each of its two "
+                  "signs) when fitting the trunk"},
+    )  # fmt: skip
+    orientations: int = field(
+        default=4,
+        metadata={"help": "best distinct trunk orientations whose limbs are searched and "
+                  "fully fitted"},
+    )  # fmt: skip
+    max_orientations: int = field(
+        default=12,
+        metadata={"help": "further orientations tried, one by one, while the fit fails the "
+                  "acceptance test"},
+    )  # fmt: skip
+    seed: int = field(default=0, metadata={"help": "seed of the point subset"})
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """A fitted body. residual_median/rms: point-to-surface distances of the cloud's points to
+    the posed mesh (cloud units, metres for metric clouds); inlier_fraction: share of points
+    within `FitConfig.inlier_distance`; joints: node name -> (3,) position."""
+
+    pose: Pose
+    shape: BodyShape
+    success: bool
+    message: str
+    residual_median: float
+    residual_rms: float
+    inlier_fraction: float
+    points: int
+    seconds: float
+    candidates: int
+
+    @property
+    def joints(self) -> dict[str, np.ndarray]:
+        world = forward_kinematics(self.pose, self.shape)
+        return {name: world[i, :3, 3].copy() for i, name in enumerate(NODE_NAMES)}
+
+    def summary(self) -> dict[str, object]:
+        return {
+            "success": self.success,
+            "message": self.message,
+            "residual_median": self.residual_median,
+            "residual_rms": self.residual_rms,
+            "inlier_fraction": self.inlier_fraction,
+            "height": self.shape.height,
+            "points": self.points,
+            "seconds": self.seconds,
+            "candidates": self.candidates,
+        }
+
+
+class _Surface:
+    """A dense sample of the model surface, linear in the girth factor, at height 1.
+
+    Per sample: its node, its position in the node frame for g = 1 and the change per unit g,
+    and its outward normal in the node frame.
+    """
+
+    def __init__(self, n_rings: int = 12, n_around: int = 18) -> None:
+        def sample(girth: float) -> list[tuple[np.ndarray, np.ndarray, int]]:
+            """(vertices in the node frame, faces, node) of every segment at height 1."""
+            out = []
+            for spec in segment_specs(shape_from_scales(1.0, girth)):
+                v, f = superquadric(np.array(spec.semi_axes), spec.eps_lat, spec.eps_lon,
+                                    n_rings, n_around)  # fmt: skip
+                out.append((v + np.array(spec.centre_in_node), f, NODE_NAMES.index(spec.node)))
+            return out
+
+        # Every semi-axis is linear in g, so two girths give the sample at any girth.
+        one, two = sample(1.0), sample(2.0)
+        self.in_node = np.concatenate([v for v, _, _ in one])
+        self.per_girth = np.concatenate([v for v, _, _ in two]) - self.in_node
+        self.normal_in_node = np.concatenate([_vertex_normals(v, f) for v, f, _ in one])
+        self.node = np.concatenate([np.full(len(v), node) for v, _, node in one])
+
+    def posed(self, x: np.ndarray, index: np.ndarray | slice = slice(None)):
+        """World positions and normals of samples `index` for unknowns x = (pose, h, g)."""
+        h, g = x[_H], x[_G]
+        world = forward_kinematics(Pose(x[:N_POSE_PARAMS]), BodyShape.default(h))
+        node = self.node[index]
+        rot, trans = world[node, :3, :3], world[node, :3, 3]
+        local = h * (self.in_node[index] + (g - 1.0) * self.per_girth[index])
+        return (
+            np.einsum("nij,nj->ni", rot, local) + trans,
+            np.einsum("nij,nj->ni", rot, self.normal_in_node[index]),
+        )
+
+
+def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    face = np.cross(b - a, c - a)
+    acc = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(acc, faces[:, k], face)
+    return acc / np.maximum(np.linalg.norm(acc, axis=1), 1e-300)[:, None]
+
+
+@functools.cache
+def _surface() -> _Surface:
+    """The model surface sample, built once per process (it depends on nothing)."""
+    return _Surface()
+
+
+def _bounds(h0: float) -> tuple[np.ndarray, np.ndarray]:
+    # Girths of adults vary by about +-20% around the default proportions.
+    lo = np.concatenate([LOWER_LIMITS, [0.8 * h0, 0.8]])
+    hi = np.concatenate([UPPER_LIMITS, [1.3 * h0, 1.25]])
+    return lo, hi
+
+
+# Robust losses rho(d^2 / s^2) and their IRLS weights rho'(.): soft-L1 for the final fit
+# (robust, still convex near 0) and Cauchy for the searches, where whole limbs may be unmatched
+# and their points must not drag the rest.
+_LOSSES = {
+    "soft_l1": (lambda z: 2 * (np.sqrt(1 + z) - 1), lambda z: 1 / np.sqrt(1 + z)),
+    "cauchy": (lambda z: np.log1p(z), lambda z: 1 / (1 + z)),
+}
+
+
+def _match(surface: _Surface, x: np.ndarray, points: np.ndarray, samples: np.ndarray) -> np.ndarray:
+    """Index of the nearest of the surface `samples` to every point."""
+    posed, _ = surface.posed(x, samples)
+    return samples[cKDTree(posed).query(points, k=1)[1]]
+
+
+def _linearise(
+    surface: _Surface, x: np.ndarray, points: np.ndarray, match: np.ndarray, free: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Residuals e = p - w (N, 3), normals (N, 3) and the Jacobian dw/dx[free] (N, 3, P).
+
+    Pose derivatives are analytic (`pose_derivative_axes`); h and g by forward differences.
+    """
+    h = x[_H]
+    world, axes, pivots = pose_derivative_axes(Pose(x[:N_POSE_PARAMS]), BodyShape.default(h))
+    node = surface.node[match]
+    rot, trans = world[node, :3, :3], world[node, :3, 3]
+    local = h * (surface.in_node[match] + (x[_G] - 1.0) * surface.per_girth[match])
+    posed = np.einsum("nij,nj->ni", rot, local) + trans
+    normal = np.einsum("nij,nj->ni", rot, surface.normal_in_node[match])
+    jac = np.zeros((len(points), 3, len(free)))
+    for col, k in enumerate(free):
+        if k < N_POSE_PARAMS:
+            moved = PARAM_MOVES_NODE[k][node]
+            if POSE_LAYOUT[k].kind == "translation":
+                jac[moved, :, col] = axes[k]
+            else:
+                jac[moved, :, col] = np.cross(axes[k], posed[moved] - pivots[k])
+        else:
+            step = 1e-4 * (h if k == _H else 1.0)
+            y = x.copy()
+            y[k] += step
+            jac[:, :, col] = (surface.posed(y, match)[0] - posed) / step
+    return points - posed, normal, jac
+
+
+@dataclass(frozen=True)
+class _Problem:
+    """What every ICP stage shares: the surface, the bounds, the robust scale."""
+
+    surface: _Surface
+    bounds: tuple[np.ndarray, np.ndarray]
+    scale: float
+    tangent_weight: float = 0.3
+
+    def distances2(self, e: np.ndarray, n: np.ndarray) -> np.ndarray:
+        """Squared distances in the metric n n^T + t^2 (I - n n^T): point-to-plane plus a weak
+        tangential pull (which keeps points from sliding along flat parts)."""
+        along = np.einsum("ni,ni->n", e, n)
+        t2 = self.tangent_weight**2
+        return t2 * np.einsum("ni,ni->n", e, e) + (1 - t2) * along**2
+
+    def icp(
+        self, x: np.ndarray, points: np.ndarray, free: np.ndarray, rounds: int, steps: int,
+        loss: str = "soft_l1", samples: np.ndarray | None = None,
+    ) -> np.ndarray:  # fmt: skip
+        """ICP on the unknowns `free` (indices into x): each round matches every point to the
+        nearest surface sample (of `samples`, default all), then takes `steps` damped
+        Gauss-Newton steps with robust (IRLS) weights, projected onto the bounds."""
+        rho, weight_of = _LOSSES[loss]
+        samples = np.arange(len(self.surface.node)) if samples is None else samples
+        x = x.copy()
+        lo, hi = self.bounds[0][free], self.bounds[1][free]
+        x[free] = np.clip(x[free], lo, hi)
+        t2, s2 = self.tangent_weight**2, self.scale**2
+        for _ in range(rounds):
+            match = _match(self.surface, x, points, samples)
+            damping, start = 1e-3, x[free].copy()
+            for _ in range(steps):
+                e, n, jac = _linearise(self.surface, x, points, match, free)
+                z = self.distances2(e, n) / s2
+                metric = t2 * np.eye(3) + (1 - t2) * n[:, :, None] * n[:, None]
+                mj = np.einsum("nij,njp->nip", weight_of(z)[:, None, None] * metric, jac)
+                hess = np.einsum("niq,nip->qp", jac, mj)
+                grad = np.einsum("nip,ni->p", mj, e)
+                current = float(np.sum(rho(z)))
+                for _ in range(6):  # Levenberg-Marquardt: raise the damping until cost drops
+                    a = hess + damping * np.diag(np.diag(hess) + 1e-9)
+                    trial = x.copy()
+                    trial[free] = np.clip(x[free] + np.linalg.solve(a, grad), lo, hi)
+                    posed, normal = self.surface.posed(trial, match)
+                    if float(np.sum(rho(self.distances2(points - posed, normal) / s2))) < current:
+                        x, damping = trial, max(damping / 3, 1e-7)
+                        break
+                    damping *= 10
+                else:
+                    break
+            if np.abs(x[free] - start).max() < 1e-4:
+                break
+        return x
+
+    def cost(self, x: np.ndarray, points: np.ndarray, samples: np.ndarray | None = None,
+             keep_model: float = 0.6) -> float:  # fmt: skip
+        """Mean Cauchy cost of cloud-to-surface distances plus half that of the surface-to-cloud
+        distances of the `keep_model` nearest surface samples (the rest may be hidden)."""
+        rho = _LOSSES["cauchy"][0]
+        posed, _ = self.surface.posed(x, slice(None) if samples is None else samples)
+        d_cloud = cKDTree(posed).query(points, k=1)[0]
+        d_model = np.sort(cKDTree(points).query(posed, k=1)[0])[: int(keep_model * len(posed))]
+        return float(rho((d_cloud / self.scale) ** 2).mean()
+                     + 0.5 * rho((d_model / self.scale) ** 2).mean())  # fmt: skip
+
+
+def _orientation_candidates(points: np.ndarray, headings: int) -> tuple[list[np.ndarray], float]:
+    """world_from_body rotations from the principal axes: the longest axis, either sign, as the
+    body's up, times `headings` facing directions evenly around it; and the extent along it."""
+    centre = points.mean(axis=0)
+    _, _, axes = np.linalg.svd(points - centre, full_matrices=False)  # rows, longest first
+    # The trunk is along the longest axis when standing; folded (sitting, bending) it is tilted
+    # up to about 45 degrees towards another axis.
+    ups = [axes[0]] + [(axes[0] + s * axes[k]) / np.sqrt(2) for k in (1, 2) for s in (1, -1)]
+    rotations = []
+    for up in [sign * axis for axis in ups for sign in (1.0, -1.0)]:
+        ref = axes[2] if abs(up @ axes[2]) < 0.9 else axes[1]
+        side = np.cross(up, ref)
+        side /= np.linalg.norm(side)
+        ahead = np.cross(side, up)
+        for angle in 2 * np.pi * np.arange(headings) / headings:
+            facing = np.cos(angle) * ahead + np.sin(angle) * side
+            rotations.append(np.stack([np.cross(up, facing), up, facing], axis=1))  # X, Y, Z
+    along = (points - centre) @ axes[0]
+    return rotations, float(along.max() - along.min())
+
+
+def _rotation_angle(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.arccos(np.clip((np.trace(a.T @ b) - 1) / 2, -1.0, 1.0)))
+
+
+def _distinct(fits: list[tuple[float, np.ndarray]], count: int) -> list[np.ndarray]:
+    """The `count` lowest-cost fits whose root orientations differ by more than 20 degrees."""
+    kept: list[tuple[np.ndarray, np.ndarray]] = []
+    for _, x in sorted(fits, key=lambda item: item[0]):
+        rot = forward_kinematics(Pose(x[:N_POSE_PARAMS]), BodyShape.default(x[_H]))[0, :3, :3]
+        if all(_rotation_angle(rot, other) > np.deg2rad(20) for _, other in kept):
+            kept.append((x, rot))
+        if len(kept) == count:
+            break
+    return [x for x, _ in kept]
+
+
+def _initial_x(rotation: np.ndarray, points: np.ndarray, height: float) -> np.ndarray:
+    up = rotation[:, 1]
+    along = points @ up
+    floor = along.min()
+    centre = points.mean(axis=0)
+    pelvis = centre + (floor + BodyShape.default(height).hip_height - centre @ up) * up
+    x = np.zeros(N_POSE_PARAMS + 2)
+    x[_ROOT[:3]] = pelvis
+    x[_ROOT[3:]] = np.deg2rad(rotations_to_channels(rotation, "ZXY"))
+    x[_H], x[_G] = height, 1.0
+    return x
+
+
+def _limb_values(limb: str, candidate: tuple[float, ...]) -> np.ndarray:
+    values = np.deg2rad(np.array(candidate, dtype=float))
+    if limb.startswith("r_"):
+        values[0] = -values[0]  # abduction mirrors
+    return values
+
+
+def _candidates(limb: str) -> tuple[tuple[float, ...], ...]:
+    return _ARM_CANDIDATES if limb.endswith("arm") else _LEG_CANDIDATES
+
+
+def _search_limbs(problem: _Problem, x: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Each limb in turn: every candidate configuration is scored as it is, the best few are
+    refined by ICP on the limb's own four parameters, and the lowest cost (the current
+    configuration included) is kept."""
+    lo, hi = problem.bounds
+    for limb, idx in _LIMBS.items():
+        trials = []
+        # Pre-scoring on every 4th surface sample: 4x cheaper, the ranking barely changes.
+        sparse = np.arange(0, len(problem.surface.node), 4)
+        for candidate in _candidates(limb):
+            y = x.copy()
+            y[idx] = np.clip(_limb_values(limb, candidate), lo[idx], hi[idx])
+            trials.append((problem.cost(y, points, sparse), y))
+        trials.sort(key=lambda item: item[0])
+        scored = [(problem.cost(x, points), x)]
+        for _, y in trials[:_REFINED_CANDIDATES]:
+            y = problem.icp(y, points, np.array(idx), rounds=3, steps=2, loss="cauchy")
+            scored.append((problem.cost(y, points), y))
+        x = min(scored, key=lambda item: item[0])[1]
+    return x
+
+
+def check_cloud(points: np.ndarray) -> np.ndarray:
+    """(N, 3) finite float points, or ValueError naming the problem."""
+    points = np.asarray(points, dtype=float)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"a point cloud needs shape (N, 3), got {points.shape}")
+    if len(points) == 0:
+        raise ValueError("the point cloud is empty")
+    bad = ~np.isfinite(points).all(axis=1)
+    if bad.any():
+        raise ValueError(f"the point cloud has {int(bad.sum())} points with NaN or infinite "
+                         "coordinates")  # fmt: skip
+    if len(points) < 100:
+        raise ValueError(f"the point cloud has only {len(points)} points; a body fit needs "
+                         "at least 100")  # fmt: skip
+    return points
+
+
+def fit_body(points: np.ndarray, config: FitConfig | None = None,
+             up: np.ndarray | None = None) -> FitResult:  # fmt: skip
+    """Fit scale and pose to `points` (N, 3); see the module docstring for the method.
+
+    up: (3,) the world's up direction when known (e.g. from a camera rig): only orientations
+    whose body axis lies within 60 degrees of it are tried.
+    """
+    config = config or FitConfig()
+    start = time.perf_counter()
+    points = check_cloud(points)
+    rng = np.random.default_rng(config.seed)
+    if len(points) > config.max_points:
+        points = points[rng.choice(len(points), config.max_points, replace=False)]
+    coarse = points[rng.choice(len(points), min(400, len(points)), replace=False)]
+    surface = _surface()
+    rotations, extent = _orientation_candidates(points, config.headings)
+    if up is not None:
+        up = np.asarray(up, dtype=float) / np.linalg.norm(up)
+        rotations = [r for r in rotations if r[:, 1] @ up > 0.5] or rotations
+    if not extent > 0:
+        raise ValueError("the point cloud has no extent")
+    # The extent along the body axis is the height standing, less when crouching, more with
+    # the arms raised: h is searched within [0.8, 1.3] of it.
+    problem = _Problem(surface, _bounds(extent), config.robust_scale * extent)
+    trunk_samples = np.flatnonzero(np.isin(surface.node, _TRUNK_NODES))
+
+    # 2. Root: the trunk alone (pelvis, chest, head) fitted rigidly, with the spine's bend;
+    # limb points are outliers of the Cauchy loss.
+    trunk = np.array(_ROOT + [PARAM_INDEX["spine_flex"]])
+    roots = []
+    for rotation in rotations:
+        for bend in _SPINE_CANDIDATES:  # upright, and bent forward (the fold moves the axes)
+            x = _initial_x(rotation, coarse, extent)
+            x[PARAM_INDEX["spine_flex"]] = np.deg2rad(bend)
+            x = problem.icp(x, coarse, trunk, rounds=5, steps=3, loss="cauchy",
+                            samples=trunk_samples)  # fmt: skip
+            roots.append((problem.cost(x, coarse, trunk_samples, keep_model=0.5), x))
+    candidates = len(roots)
+
+    # 3. Limbs, one at a time, for the best orientations; 4. full ICP from each, keeping the
+    # lowest cost. When the best so far fails the acceptance test, the next orientations are
+    # tried, up to `max_orientations`.
+    best: tuple[float, np.ndarray] | None = None
+    everything = np.arange(N_POSE_PARAMS + 2)
+    for tried, x in enumerate(_distinct(roots, config.max_orientations)):
+        if tried >= config.orientations and _acceptance(best[1], points, config)[0]:
+            break
+        x = _search_limbs(problem, x, coarse)
+        x = problem.icp(x, coarse, everything, rounds=5, steps=3, loss="cauchy")
+        # A second pass: a limb that lost its points to a misplaced neighbour finds them now.
+        x = _search_limbs(problem, x, coarse)
+        x = problem.icp(x, points, everything, rounds=config.iterations, steps=3)
+        candidates += 2 * sum(len(_candidates(limb)) for limb in _LIMBS)
+        cost = problem.cost(x, points)
+        if best is None or cost < best[0]:
+            best = (cost, x)
+    assert best is not None
+    ok, problems, (pose, shape, median, rms, inliers) = _acceptance(best[1], points, config)
+    message = "; ".join(problems) if problems else "ok"
+    return FitResult(pose, shape, ok, message, median, rms, inliers, len(points),
+                     time.perf_counter() - start, candidates)  # fmt: skip
+
+
+def _acceptance(x: np.ndarray, points: np.ndarray, config: FitConfig):
+    """Whether the fit `x` passes the acceptance test, the reasons it does not, and its pose,
+    shape and exact mesh residuals (median, RMS, inlier fraction)."""
+    pose = Pose(np.clip(x[:N_POSE_PARAMS], LOWER_LIMITS, UPPER_LIMITS))
+    shape = shape_from_scales(float(x[_H]), float(x[_G]))
+    distances = mesh_distances(BodyModel(shape), pose, points)
+    median, rms = float(np.median(distances)), float(np.sqrt(np.mean(distances**2)))
+    inliers = float(np.mean(distances <= config.inlier_distance * shape.height))
+    problems = []
+    if median > config.max_median_residual * shape.height:
+        problems.append(f"median distance {median:.3g} > {config.max_median_residual:g} of "
+                        f"the height")  # fmt: skip
+    if inliers < config.min_inlier_fraction:
+        problems.append(f"only {inliers:.0%} of the points lie on the body")
+    if config.metric and not 0.9 <= shape.height <= 2.3:
+        problems.append(f"height {shape.height:.2f} m is not a human one")
+    return not problems, problems, (pose, shape, median, rms, inliers)
+
+
+def mesh_distances(model: BodyModel, pose: Pose, points: np.ndarray) -> np.ndarray:
+    """(N,) unsigned distance from each point to the posed triangle mesh (Open3D raycasting)."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(model.posed_vertices(pose).astype(np.float32)),
+        o3d.core.Tensor(np.asarray(model.faces, dtype=np.uint32)),
+    )
+    query = o3d.core.Tensor(np.asarray(points, dtype=np.float32))
+    return scene.compute_distance(query).numpy().astype(float)
+

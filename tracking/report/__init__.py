@@ -1,0 +1,1 @@
+"""Motion reports: segment parameters, kinematics, joint angles and inverse dynamics."""

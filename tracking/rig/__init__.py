@@ -1,0 +1,1 @@
+"""The camera rig: calibrated cameras, their readers, video workspaces, synthetic sequences."""

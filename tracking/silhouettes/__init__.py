@@ -1,0 +1,1 @@
+"""Silhouettes (thesis 6.2.1): background models, subtraction, the multi-view hull check."""

@@ -1,0 +1,291 @@
+"""Visual hulls on a voxel grid, and the multi-view consistency of silhouettes built on them.
+
+A voxel is inside a view's silhouette cone when its centre projects into the silhouette. The
+*visual hull* of a set of calibrated silhouettes is the set of voxels inside every cone (Laurentini
+1994). Two uses:
+
+* :func:`visual_hull` gives the tracker its first guess of the body (`tracking.track.tracker`).
+* :func:`consistent_silhouettes` keeps, in each view, only the silhouette pixels that the other
+  views confirm: the pixels under the projection of the hull. A foreground blob that only one
+  camera sees (a reflection on the floor, a person in one camera's background photo, a
+  background that changed behind one camera) has no 3D point inside the other views'
+  silhouettes and goes; the subject, seen by all, stays. This is the silhouette-consistency
+  test of multi-view segmentation (e.g. Campbell et al., "Automatic object segmentation from
+  calibrated images", 2011), here with a tolerance: every silhouette is dilated before the
+  carving, so a body part that one view segments a few pixels too thin is not cut from the
+  others.
+
+A voxel that projects outside a view's image (or its content box, see
+`tracking.rig.video.content_box`) is not carved by that view: a subject leaving one camera's field
+of view stays in the others. Views whose silhouette is empty take no part in the carving. For
+the check a voxel must be seen by all the views but one (at least two): with fewer, a blob seen
+by one camera could be "confirmed" by a single other camera whose silhouette happens to lie
+along the same rays (on the Pose2Sim demo, reflections on a mat in front of one camera, rays
+that only one other camera sees, through the subject's silhouette in it).
+
+Pure numpy and OpenCV; no I/O.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from recon.errors import UserError
+from tracking.rig.cameras import Camera
+
+Box = tuple[int, int, int, int]
+"""(x0, y0, x1, y1), end exclusive: the part of an image that holds the picture."""
+
+
+def rays_meeting_point(cameras: Sequence[Camera], masks: Sequence[np.ndarray]) -> np.ndarray:
+    """Least-squares meeting point (3,) of the rays through every non-empty silhouette's
+    centroid, world frame; ValueError when fewer than two silhouettes have pixels."""
+    a, b = np.zeros((3, 3)), np.zeros(3)
+    used = 0
+    for cam, mask in zip(cameras, masks, strict=True):
+        rows, cols = np.nonzero(mask)
+        if len(rows) == 0:
+            continue
+        # Pixel centres are at +0.5 (the convention of `tracking.rig.cameras`).
+        pixel = np.array([cols.mean() + 0.5, rows.mean() + 0.5, 1.0])
+        xy = cam.undistort((np.linalg.solve(cam.K, pixel)[:2])[None])  # normalised
+        direction = cam.R.T @ np.array([xy[0, 0], xy[0, 1], 1.0])
+        direction /= np.linalg.norm(direction)
+        proj = np.eye(3) - np.outer(direction, direction)
+        a += proj
+        b += proj @ cam.center_in_world
+        used += 1
+    if used < 2:
+        empty = [c.name for c, m in zip(cameras, masks, strict=True) if not m.any()]
+        raise ValueError(f"empty silhouette in {', '.join(empty)}")
+    return np.linalg.solve(a, b)
+
+
+def check_voxel_grid(size_m: float, voxel_m: float, size_flag: str, voxel_flag: str) -> None:
+    """One-line errors (naming the flags) for a cube of side `size_m` and voxels of `voxel_m`
+    (> 0) that :func:`voxel_centres` cannot make: under two voxels, over 64 million."""
+    if not size_m > 2 * voxel_m:
+        raise UserError(f"{size_flag} {size_m} must exceed two voxels ({voxel_flag} {voxel_m})")
+    if (size_m / voxel_m) ** 3 > 64e6:
+        raise UserError(f"{size_flag} {size_m} / {voxel_flag} {voxel_m}: more than 64 million "
+                        "voxels")
+
+
+def voxel_centres(centre: np.ndarray, size_m: float, voxel_m: float) -> tuple[np.ndarray, int]:
+    """((n**3, 3) centres, n) of the cube of side ``size_m`` around ``centre``, ``voxel_m``
+    apart, in C order over (x, y, z)."""
+    n = int(np.ceil(size_m / voxel_m))
+    axis = (np.arange(n) - (n - 1) / 2) * voxel_m
+    grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
+    return grid + np.asarray(centre, dtype=float), n
+
+
+@dataclass(frozen=True)
+class Projection:
+    """Where a view sees the voxels: integer pixel (col, row), depth, and ``seen`` (in front of
+    the camera, inside the undistortable field and the image's content box)."""
+
+    col: np.ndarray
+    row: np.ndarray
+    depth: np.ndarray
+    seen: np.ndarray
+
+
+def project_voxels(camera: Camera, points: np.ndarray, box: Box | None = None) -> Projection:
+    """The pixels of (N, 3) world points in ``camera`` (pixel (i, j) covers [i, i+1) x
+    [j, j+1)), ``seen`` only within ``box`` (default: the whole image)."""
+    x0, y0, x1, y1 = box if box is not None else (0, 0, camera.width, camera.height)
+    uv, depth = camera.project(points)
+    in_cam = points @ camera.R.T + camera.t
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r2 = ((in_cam[:, :2] / in_cam[:, 2:3]) ** 2).sum(axis=1)
+        # Beyond the distortion's fold-back radius a far point could land inside the image.
+        seen = (depth > 0) & (r2 < camera.max_radius2)
+        col = np.floor(uv[:, 0])
+        row = np.floor(uv[:, 1])
+        seen &= (col >= x0) & (col < x1) & (row >= y0) & (row < y1)
+    col = np.where(seen, col, 0).astype(np.int64)
+    row = np.where(seen, row, 0).astype(np.int64)
+    return Projection(col, row, depth, seen)
+
+
+def carve(cameras: Sequence[Camera], masks: Sequence[np.ndarray], points: np.ndarray, *,
+          dilate_px: int = 0, boxes: Sequence[Box | None] | None = None,
+          min_views: int | None = None, unknown: Sequence[np.ndarray | None] | None = None,
+          ) -> tuple[np.ndarray, list[Projection]]:  # fmt: skip
+    """(N,) bool: the voxels (N, 3) inside the visual hull of the non-empty ``masks``, each
+    dilated by a disc of ``dilate_px`` pixels first (0: exact); and each view's projection.
+
+    A voxel is kept when every non-empty view that sees it (:func:`project_voxels`) has it in
+    its silhouette and at least ``min_views`` such views see it (default: all the non-empty
+    views; never fewer than two). ``unknown``: per view, None or (H, W) bool pixels whose
+    label the view cannot tell: they count as silhouette (they do not carve).
+    """
+    masks = _with_unknown(masks, unknown)
+    boxes = list(boxes) if boxes is not None else [None] * len(cameras)
+    inside = np.ones(len(points), bool)
+    seen_by = np.zeros(len(points), np.int32)
+    projections = []
+    for cam, mask, box in zip(cameras, masks, boxes, strict=True):
+        proj = project_voxels(cam, points, box)
+        projections.append(proj)
+        if not mask.any():
+            continue
+        if dilate_px > 1:
+            disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (dilate_px, dilate_px))
+            mask = cv2.dilate(mask.astype(np.uint8), disc).astype(bool)
+        hit = mask[proj.row, proj.col] & proj.seen
+        inside &= hit | ~proj.seen
+        seen_by += proj.seen
+    views = sum(bool(m.any()) for m in masks)
+    return inside & (seen_by >= max(2, views if min_views is None else min_views)), projections
+
+
+def _with_unknown(masks: Sequence[np.ndarray], unknown: Sequence[np.ndarray | None] | None
+                  ) -> Sequence[np.ndarray]:  # fmt: skip
+    """Each mask with its view's unknown pixels added (they do not carve)."""
+    if unknown is None:
+        return masks
+    return [m if u is None else m | u for m, u in zip(masks, unknown, strict=True)]
+
+
+def visual_hull(cameras: Sequence[Camera], masks: Sequence[np.ndarray], *, size_m: float,
+                voxel_m: float, unknown: Sequence[np.ndarray | None] | None = None,
+                ) -> tuple[np.ndarray, int, np.ndarray]:  # fmt: skip
+    """(centres (n**3, 3), n, occupied (n**3,) bool): the exact visual hull on a cube of side
+    ``size_m`` around the point where the centroid rays of the silhouettes and their unknown
+    pixels meet (``unknown``: as in :func:`carve`)."""
+    points, n = voxel_centres(rays_meeting_point(cameras, _with_unknown(masks, unknown)),
+                              size_m, voxel_m)
+    occupied, _ = carve(cameras, masks, points, unknown=unknown)
+    return points, n, occupied
+
+
+def surface_voxels(occupied: np.ndarray, n: int) -> np.ndarray:
+    """(n**3,) bool: occupied voxels with at least one empty 6-neighbour."""
+    occupied = occupied.reshape(n, n, n)
+    padded = np.pad(occupied, 1)
+    interior = occupied.copy()
+    for axis in range(3):
+        for shift in (-1, 1):
+            interior &= np.roll(padded, shift, axis=axis)[1:-1, 1:-1, 1:-1]
+    return (occupied & ~interior).ravel()
+
+
+# Multi-view consistency of silhouettes -----------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class HullCheckConfig:
+    """Settings of :func:`consistent_silhouettes`. Field help is the CLI's help."""
+
+    multi_view_check: bool = field(
+        default=True,
+        metadata={"help": "keep only the silhouette pixels the other cameras confirm: under the "
+                  "projection of the visual hull of all views (removes what one camera alone "
+                  "sees: reflections, people in a background photo, a changed background)"},
+    )  # fmt: skip
+    check_tolerance: float = field(
+        default=0.01,
+        metadata={"help": "silhouettes are dilated by this fraction of the image's larger side "
+                  "before the carving, so that a part one view segments too thin is kept"},
+    )  # fmt: skip
+    check_voxel_m: float = field(
+        default=0.03, metadata={"help": "voxel size of the consistency hull, metres"})
+    check_size_m: float = field(
+        default=3.0,
+        metadata={"help": "side of the cube, centred where the views' silhouettes meet, in "
+                  "which the consistency hull is carved, metres: silhouette parts outside "
+                  "it are removed"},
+    )  # fmt: skip
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.check_tolerance < 0.5:
+            raise UserError(f"--check-tolerance must be in [0, 0.5), got {self.check_tolerance}")
+        if not self.check_voxel_m > 0:
+            raise UserError(f"--check-voxel-m must be > 0, got {self.check_voxel_m}")
+        check_voxel_grid(self.check_size_m, self.check_voxel_m, "--check-size-m",
+                         "--check-voxel-m")
+
+
+_SPLAT_DOWNSCALE = 4
+"""The hull is splatted into each view at up to 1/4 of its size, then scaled up (voxels project
+to ~10 px or more in HD video); the mask is ANDed at full size."""
+
+
+def consistent_silhouettes(cameras: Sequence[Camera], masks: Sequence[np.ndarray],
+                           config: HullCheckConfig | None = None,
+                           boxes: Sequence[Box | None] | None = None,
+                           unknown: Sequence[np.ndarray | None] | None = None,
+                           ) -> list[np.ndarray]:  # fmt: skip
+    """Each (H, W) bool mask reduced to the pixels under the projection of the views' common
+    visual hull (module docstring). Masks come back unchanged when fewer than two views have a
+    silhouette, and empty when the views have no 3D point in common.
+
+    ``unknown``: per view, None or (H, W) bool pixels whose label the view cannot tell (its
+    background there is unknown): they do not carve the hull.
+    """
+    config = config or HullCheckConfig()
+    masks = [np.asarray(m, bool) for m in masks]
+    if not config.multi_view_check or sum(bool(m.any()) for m in masks) < 2:
+        return masks
+    points, _ = voxel_centres(rays_meeting_point(cameras, masks), config.check_size_m,
+                              config.check_voxel_m)
+    size = max(max(m.shape) for m in masks)
+    dilate = 2 * round(config.check_tolerance * size / 2) + 1
+    # Seen by all views but one: a subject partly out of one camera's field stays; a blob
+    # whose rays only one other camera sees (behind the subject, below the floor) does not.
+    views = sum(bool(m.any()) for m in masks)
+    kept, projections = carve(cameras, masks, points, dilate_px=dilate, boxes=boxes,
+                              min_views=max(2, views - 1), unknown=unknown)
+    out = []
+    for cam, mask, proj in zip(cameras, masks, projections, strict=True):
+        on = kept & proj.seen
+        if not on.any() or not mask.any():
+            out.append(np.zeros_like(mask))
+            continue
+        out.append(mask & splat(cam, proj, on, config.check_voxel_m))
+    return out
+
+
+def splat(camera: Camera, proj: Projection, on: np.ndarray, voxel_m: float,
+          tight: bool = False) -> np.ndarray:  # fmt: skip
+    """(H, W) bool: the pixels covered by the voxels ``on`` (of side ``voxel_m``) that ``proj``
+    projects into ``camera``; by default a little more (half a voxel's diagonal around each
+    centre), ``tight``: half a voxel, the gaps between centres closed."""
+    # Voxel centres land about `footprint` pixels apart (the nearest voxels the farthest): each
+    # is spread over half the diagonal of its cell (or half the cell, then closed), on an image
+    # reduced so that a cell is still 3 pixels or more.
+    h, w = camera.height, camera.width
+    if not on.any():
+        return np.zeros((h, w), bool)
+    footprint = voxel_m * camera.K[0, 0] / np.percentile(proj.depth[on], 5)
+    ds = int(np.clip(footprint // 3, 1, _SPLAT_DOWNSCALE))
+    radius = max(1, int(np.ceil((0.5 if tight else 0.71) * footprint / ds)))
+    small = np.zeros(((h + ds - 1) // ds, (w + ds - 1) // ds), np.uint8)
+    small[proj.row[on] // ds, proj.col[on] // ds] = 1
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+    small = cv2.dilate(small, disc)
+    if tight:
+        small = cv2.morphologyEx(small, cv2.MORPH_CLOSE, disc)
+    under = small if ds == 1 else cv2.resize(small, (small.shape[1] * ds, small.shape[0] * ds),
+                                             interpolation=cv2.INTER_NEAREST)
+    return under[:h, :w].astype(bool)
+
+
+def hull_silhouettes(cameras: Sequence[Camera], masks: Sequence[np.ndarray], *, size_m: float,
+                     voxel_m: float, unknown: Sequence[np.ndarray | None] | None = None,
+                     ) -> list[np.ndarray]:  # fmt: skip
+    """Per view, the (H, W) bool silhouette of the exact visual hull of ``masks`` (``unknown``
+    pixels do not carve): the largest body the views agree on, so its overlap with each mask
+    bounds what any 3D model can reach with these silhouettes and this calibration (up to the
+    voxel size)."""
+    masks = [np.asarray(m, bool) for m in masks]
+    points, _ = voxel_centres(rays_meeting_point(cameras, masks), size_m, voxel_m)
+    kept, projections = carve(cameras, masks, points, unknown=unknown)
+    return [splat(cam, proj, kept & proj.seen, voxel_m, tight=True)
+            for cam, proj in zip(cameras, projections, strict=True)]

@@ -1,0 +1,855 @@
+"""`mocap silhouettes`: foreground masks of every camera's video frames (thesis section 6.2.1).
+
+Reads a video workspace (`tracking.rig.video`) and writes::
+
+    WS/silhouettes/<camera>/<frame:06d>.png   uint8 masks, 255 foreground / 0 background,
+                                              frame index 0-based, one per processed frame
+    WS/silhouettes/<camera>/unknown.png       pixels whose background is unknown (255), with
+                                              --background-images only, when there are any
+    WS/logs/silhouettes.rrd                   cameras, sample frames with their masks,
+                                              backgrounds, foreground fraction over frames
+    WS/run.json                               step ``silhouettes``: config and summary
+
+The background model of each camera is either the per-pixel mean and standard deviation of
+frames that show the empty scene (``--background frames:A-B``, the thesis' method; at most
+``--background-samples`` of them, spread over A-B), or, when no such frames exist (the Pose2Sim
+demo), the temporal median and median absolute deviation of ``--background-samples`` frames
+spread evenly over the whole video (``--background median``):
+right wherever the subject covers a pixel in fewer than half of them, so a subject who hardly
+moves becomes background. Each processed frame is then classified
+(`tracking.silhouettes.subtraction`:
+foreground / background / shadow thresholds, morphological clean-up) at full resolution.
+
+``--first``, ``--last`` and ``--frame-step`` choose the processed frames. The summary gives per
+camera the foreground fraction (min / median / max over frames) and lists frames whose
+silhouette is empty or touches the image border (the subject leaving the view); these are
+warnings, printed by the CLI. All masks go to ``silhouettes.partial/`` first, which replaces
+``silhouettes/`` only when every camera is done.
+
+Under `mocap batch` (:func:`cameras_mapped_by`) the background models are a task per camera and
+the classification a task per run of about a dozen frames of a camera (:func:`frame_chunks`),
+with the very results of a plain run, which does one camera after the other in its process.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import contextvars
+import dataclasses
+import hashlib
+import itertools
+import re
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from recon.errors import UserError
+from recon.progress import bar
+from recon.sfm.images import IMAGE_SUFFIXES
+from recon.workspace import StepRecord, Timer, Workspace, atomic_output, fingerprint
+from tracking.rig.cameras import Camera
+from tracking.rig.video import STEP as INIT_STEP
+from tracking.rig.video import (
+    content_box,
+    name_in_file_name,
+    read_frames,
+    video_info,
+    video_path,
+    workspace_cameras,
+)
+from tracking.silhouettes.hull import HullCheckConfig, consistent_silhouettes
+from tracking.silhouettes.subtraction import (
+    BackgroundModel,
+    SilhouetteConfig,
+    disc,
+    fill_holes,
+    silhouette_from_frame,
+)
+
+STEP = "silhouettes"
+UNKNOWN_NAME = "unknown.png"
+"""``silhouettes/<camera>/unknown.png``: the camera's pixels whose background is unknown (255),
+left out of the tracking energy and of the silhouette IoU; written only when there are any."""
+_MAD_TO_STD = 1.4826  # as BackgroundModel.from_sequence
+_BACKGROUND_FORMAT = re.compile(r"^(median|frames:(\d+)-(\d+))$")
+
+
+@dataclass(frozen=True, kw_only=True)
+class SilhouettesConfig:
+    """Settings of the silhouettes step. Field help is the CLI's help."""
+
+    background: str = field(
+        default="median",
+        metadata={"help": "background model: 'median' (temporal median of frames spread over "
+                  "the whole video, for footage without an empty scene) or 'frames:A-B' (mean "
+                  "and spread of frames A..B, 0-based and inclusive, that show the empty scene)"},
+    )
+    background_samples: int = field(
+        default=21,
+        metadata={"help": "frames in the background model, spread evenly over the video (or "
+                  "over A-B); an even number is rounded up to odd; memory: that many decoded "
+                  "frames"},
+    )
+    background_passes: int = field(
+        default=2,
+        metadata={"help": "passes of the median background: each after the first leaves out, "
+                  "per pixel, the frames where the previous one saw the subject"},
+    )  # fmt: skip
+    first: int = field(default=0, metadata={"help": "first frame to process (0-based)"})
+    last: int | None = field(
+        default=None, metadata={"help": "last frame to process, inclusive (default: the last)"})
+    frame_step: int = field(
+        default=1, metadata={"help": "process every N-th frame from --first (1: all)"})
+    background_images: Path | None = field(
+        default=None,
+        metadata={"help": "folder of photos of the scene taken by the fixed cameras, one per "
+                  "camera with the camera's name in the file name (cam01_ext.png for cam01), "
+                  "at the video's size or the calibrated size the video was scaled from; with "
+                  "--background median they replace the median where the subject moved (where "
+                  "a subject who stays put is part of the median); they may show other people "
+                  "or objects: the multi-view check removes what one camera alone sees"},
+    )  # fmt: skip
+    logged_frames: int = field(
+        default=5,
+        metadata={"help": "frames per camera logged with their masks to logs/silhouettes.rrd"},
+    )
+    thresholds: SilhouetteConfig = field(
+        default_factory=SilhouetteConfig,
+        metadata={"help": "classification thresholds and clean-up (SilhouetteConfig flags)"},
+    )
+    hull: HullCheckConfig = field(
+        default_factory=HullCheckConfig,
+        metadata={"help": "multi-view consistency of the silhouettes (HullCheckConfig flags)"},
+    )
+
+    def __post_init__(self) -> None:
+        if _BACKGROUND_FORMAT.match(self.background) is None:
+            raise UserError(f"--background {self.background!r}: expected 'median' or "
+                            "'frames:A-B' (for example frames:0-29)")
+        span = self.background_frames
+        if span is not None and span[0] > span[1]:
+            raise UserError(f"--background {self.background}: A must not exceed B")
+        for name, low in (("background_samples", 1), ("background_passes", 1), ("first", 0),
+                          ("frame_step", 1),
+                          ("logged_frames", 0)):
+            if getattr(self, name) < low:
+                raise UserError(f"--{name.replace('_', '-')} must be >= {low}, "
+                                f"got {getattr(self, name)}")
+        if self.last is not None and self.last < self.first:
+            raise UserError(f"--last {self.last} is before --first {self.first}")
+        if self.background_images is not None and self.background_frames is not None:
+            raise UserError("--background-images completes the median background; with "
+                            f"--background {self.background} the empty scene is in the video")
+
+    @property
+    def background_frames(self) -> tuple[int, int] | None:
+        """(A, B) of ``frames:A-B``, None for the median."""
+        found = _BACKGROUND_FORMAT.match(self.background)
+        if found is None or found.group(2) is None:
+            return None
+        return int(found.group(2)), int(found.group(3))
+
+
+def median_background(frames: list[np.ndarray], thresholds: SilhouetteConfig | None = None,
+                      passes: int = 2) -> BackgroundModel:
+    """The background of a sequence without an empty frame: per pixel, the temporal median of
+    an odd number of (H, W, 3) uint8 frames and the spread (1.4826 MAD) around it.
+
+    A first pass takes every frame (`_middle`: an odd-even transposition sort across frames
+    with element-wise min/max, exactly ``np.median`` in a third of its time). Where the subject
+    stands in many of the frames, that median is partly the subject and its spread is
+    inflated by the subject's motion, so the silhouettes miss what stands still. Each further
+    pass classifies the frames against the model so far (`thresholds`) and takes the median and
+    spread over the frames where the pixel is background, the silhouettes dilated by a margin;
+    a pixel with fewer than a quarter of the frames free keeps its previous value.
+    """
+    if len(frames) % 2 == 0 or any(f.dtype != np.uint8 for f in frames):
+        raise ValueError("median_background needs an odd number of uint8 frames")
+    median = _middle([np.array(f) for f in frames])
+    mad = _middle([cv2.absdiff(f, median) for f in frames])
+    model = BackgroundModel(median.astype(np.float32),
+                            (_MAD_TO_STD * mad.astype(np.float32)).astype(np.float32))
+    thresholds = thresholds or SilhouetteConfig()
+    for _ in range(passes - 1):
+        h, w = frames[0].shape[:2]
+        margin = max(3, round(0.01 * max(h, w)))
+        free = np.stack([cv2.dilate(silhouette_from_frame(f, model, thresholds).astype(np.uint8),
+                                    np.ones((margin, margin), np.uint8)) == 0
+                         for f in frames])  # fmt: skip
+        model = _free_median(frames, free, model)
+    return model
+
+
+def _free_median(frames: list[np.ndarray], free: np.ndarray, previous: BackgroundModel
+                 ) -> BackgroundModel:  # fmt: skip
+    """Per pixel and channel, median and 1.4826 MAD over the frames where `free` (N, H, W);
+    the `previous` model where fewer than a quarter of the frames are free. Row blocks bound
+    the memory (a 16-bit copy of the frames of a block)."""
+    n, h, w = free.shape
+    mean, std = previous.mean.copy(), previous.std.copy()
+    count = free.sum(axis=0)
+    enough = count >= max(1, n // 4)
+    invalid = np.uint16(65535)  # sorts after every 8-bit value
+    rows = max(1, (1 << 24) // (n * w * 3))
+    for r0 in range(0, h, rows):
+        r1 = min(h, r0 + rows)
+        block = np.stack([f[r0:r1] for f in frames]).astype(np.uint16)  # (N, r, W, 3)
+        block[~free[:, r0:r1]] = invalid
+        block.sort(axis=0)
+        k = count[r0:r1]
+        lo = np.maximum((k - 1) // 2, 0)[None, :, :, None]
+        hi = np.maximum(k // 2, 0)[None, :, :, None]
+        lo, hi = (np.broadcast_to(i, (1, *block.shape[1:])) for i in (lo, hi))
+        med = 0.5 * (np.take_along_axis(block, lo, 0)[0].astype(np.float32)
+                     + np.take_along_axis(block, hi, 0)[0].astype(np.float32))
+        dev = np.abs(block.astype(np.float32) - med[None])
+        dev[block == invalid] = np.inf
+        dev.sort(axis=0)
+        mad = 0.5 * (np.take_along_axis(dev, lo, 0)[0] + np.take_along_axis(dev, hi, 0)[0])
+        ok = enough[r0:r1]
+        mean[r0:r1][ok] = med[ok]
+        std[r0:r1][ok] = _MAD_TO_STD * mad[ok]
+    return BackgroundModel(mean, std)
+
+
+_MIN_PHOTO_AGREEMENT = 0.3
+"""Least fraction of the pixels away from the subject where a camera's background photo must
+agree with its video's median (a photo from another camera or position agrees nearly nowhere;
+the Pose2Sim demo's photos agree on 79-93%)."""
+
+
+def with_background_photo(model: BackgroundModel, frames: list[np.ndarray], photo: np.ndarray,
+                          thresholds: SilhouetteConfig | None = None,
+                          ) -> tuple[BackgroundModel, np.ndarray, dict[str, Any]]:  # fmt: skip
+    """The median background `model` of `frames` with a photo of the empty scene (H, W, 3)
+    uint8 put in where the subject moved; the pixels whose background is unknown (H, W) bool;
+    and what was done (``area``: fraction of the image taken from the photo; ``unknown``:
+    fraction unknown; ``agreement``: fraction of the rest where the photo matches the median;
+    ``gain``: per-channel factor applied to the photo).
+
+    Where the subject stands in most frames the median *is* the subject (a person balancing on
+    one spot: the torso and shorts). Where it moved is known: the union of its silhouettes
+    against `model` over `frames`, closed over 3% of the image's larger side, grown by 1% and
+    with its holes filled (what the subject always covers is enclosed by where it moved). There
+    the photo, brought to the video's exposure by a per-channel gain measured where both
+    agree, is the background, with no spread of its own (the classification's ``min_std``
+    floor), wherever the video confirms it: the photo is background in one of the frames at
+    least, or the pixel belongs to a patch of unconfirmed pixels enclosed by confirmed ones
+    (what the subject never uncovers). A photo shot at another time may show people or
+    objects the video does not: such a patch borders pixels where the photo always matches,
+    and there the median stays, but where the subject moved neither is to be trusted: there
+    the background is *unknown* (`UNKNOWN_NAME`): the multi-view check does not carve with
+    those pixels, and the tracker leaves them out of its energy.
+    """
+    thresholds = thresholds or SilhouetteConfig()
+    if photo.shape != model.shape:
+        raise ValueError(f"photo is {photo.shape} but the background model is {model.shape}")
+    h, w = photo.shape[:2]
+    moved = np.zeros((h, w), np.uint8)
+    for frame in frames:
+        moved |= silhouette_from_frame(frame, model, thresholds).astype(np.uint8)
+    size = max(h, w)
+    region = cv2.morphologyEx(moved, cv2.MORPH_CLOSE, disc(_odd(0.03 * size)))
+    region = cv2.dilate(region, disc(_odd(0.01 * size)))
+    region = fill_holes(region, h * w).astype(bool)
+    picture = photo.astype(np.float32)
+    std = np.maximum(model.std, np.float32(thresholds.min_std))
+    agree = (np.abs(picture - model.mean) < thresholds.lower_sigma * std).all(axis=2) & ~region
+    agreement = float(agree.sum() / max(1, (~region).sum()))
+    if agreement < _MIN_PHOTO_AGREEMENT:
+        return model, np.zeros((h, w), bool), {"area": 0.0, "unknown": 0.0,
+                                               "agreement": agreement, "gain": None}
+    gain = [float(np.median(model.mean[..., c][agree] / np.maximum(picture[..., c][agree], 1.0)))
+            for c in range(picture.shape[2])]  # fmt: skip
+    picture *= np.asarray(gain, np.float32)
+    # How often each pixel shows the photo's background (within the lower threshold).
+    shown = np.zeros((h, w), np.float32)
+    tolerance = thresholds.lower_sigma * thresholds.min_std
+    for frame in frames:
+        shown += (np.abs(frame.astype(np.float32) - picture) < tolerance).all(axis=2)
+    shown /= len(frames)
+    use = region & (shown > 0)
+    use |= region & _enclosed(shown == 0, shown, round(0.01 * size), within=region)
+    unknown = region & ~use
+    inside = use[..., None]
+    combined = BackgroundModel(np.where(inside, picture, model.mean),
+                               np.where(inside, np.float32(0), model.std))
+    return combined, unknown, {"area": float(use.mean()), "unknown": float(unknown.mean()),
+                               "agreement": agreement, "gain": gain}
+
+
+_ENCLOSED_MAX_STATIC = 0.15
+"""A patch of pixels where the photo is never background counts as the subject's hidden core
+when at most this fraction of its rim shows the photo's background nearly always (90% of the
+frames); foreign objects in the Pose2Sim photos have 22-34% of their rim static."""
+
+
+def _enclosed(unconfirmed: np.ndarray, shown: np.ndarray, rim_px: int, within: np.ndarray
+              ) -> np.ndarray:  # fmt: skip
+    """The patches of `unconfirmed` (H, W) bool that meet `within` and whose rim (`rim_px`
+    wide) is at most `_ENCLOSED_MAX_STATIC` static (the photo shown in 90% of the frames or
+    more)."""
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(unconfirmed.astype(np.uint8),
+                                                               connectivity=8)
+    keep = np.zeros(count, bool)
+    ring = disc(_odd(2 * rim_px + 1))
+    for k in np.unique(labels[within & unconfirmed]):
+        x, y, cw, ch = stats[k, :4]
+        x0, y0 = max(0, x - rim_px - 1), max(0, y - rim_px - 1)
+        x1 = min(unconfirmed.shape[1], x + cw + rim_px + 1)
+        y1 = min(unconfirmed.shape[0], y + ch + rim_px + 1)
+        patch = (labels[y0:y1, x0:x1] == k).astype(np.uint8)
+        rim = cv2.dilate(patch, ring).astype(bool) & ~patch.astype(bool)
+        if rim.any():
+            keep[k] = (shown[y0:y1, x0:x1][rim] >= 0.9).mean() <= _ENCLOSED_MAX_STATIC
+    return keep[labels]
+
+
+def _odd(length: float) -> int:
+    """An odd structuring-element diameter of at least 3 pixels near `length`."""
+    return max(3, round(length) | 1)
+
+
+def background_images(folder: Path, cameras: Sequence[Camera]) -> dict[str, Path]:
+    """Camera name -> its photo in `folder`: the one image whose file name contains the
+    camera's name as a word, case and separators ignored like the videos' names
+    (``cam01_ext.png`` for cam01 or cam_01, not for cam010); one-line errors for
+    a missing folder, no photo of any camera, or two photos of one."""
+    if not folder.is_dir():
+        raise UserError(f"--background-images {folder}: no such folder")
+    images = sorted(p for p in folder.iterdir()
+                    if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
+    found: dict[str, Path] = {}
+    for camera in cameras:
+        word = name_in_file_name(camera.name)
+        matches = [p for p in images if word.search(p.stem.lower())]
+        if len(matches) > 1:
+            raise UserError(f"--background-images {folder}: {len(matches)} images name camera "
+                            f"{camera.name} ({', '.join(p.name for p in matches[:3])}); keep one")
+        if matches:
+            found[camera.name] = matches[0]
+    if not found:
+        raise UserError(f"--background-images {folder}: no image names a camera "
+                        f"({', '.join(c.name for c in cameras)})")
+    return found
+
+
+def read_background_image(path: Path, camera: Camera) -> np.ndarray:
+    """The photo (H, W, 3) uint8 at the camera's video size: as it is, or, when it has the size
+    the video was scaled from (`tracking.rig.video` letterboxed videos), scaled by the same factor
+    and centred between black bars."""
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        raise UserError(f"cannot read background image {path}")
+    h, w = image.shape[:2]
+    if (h, w) == (camera.height, camera.width):
+        return image
+    s = min(camera.width / w, camera.height / h)
+    if abs(s - 1.0) > 0.1:
+        raise UserError(f"background image {path.name} is {w}x{h}, camera {camera.name}'s video "
+                        f"{camera.width}x{camera.height}")
+    pad_x, pad_y = (camera.width - s * w) / 2, (camera.height - s * h) / 2
+    # Pixel centres at +0.5 on both sides: x_video = s * x_photo + pad, in OpenCV's integer
+    # centres x' = s * x + (s / 2 + pad - 1 / 2).
+    warp = np.float32([[s, 0, s / 2 + pad_x - 0.5], [0, s, s / 2 + pad_y - 0.5]])
+    return cv2.warpAffine(image, warp, (camera.width, camera.height), flags=cv2.INTER_LINEAR)
+
+
+def _middle(arrays: list[np.ndarray]) -> np.ndarray:
+    """Element-wise median of an odd number of equal-shape arrays (sorts them in place)."""
+    n = len(arrays)
+    for rnd in range(n):
+        for j in range(rnd % 2, n - 1, 2):
+            low = np.minimum(arrays[j], arrays[j + 1])
+            np.maximum(arrays[j], arrays[j + 1], out=arrays[j + 1])
+            arrays[j] = low
+    return arrays[n // 2]
+
+
+def _spread(count: int, samples: int, *, odd: bool) -> list[int]:
+    """Up to ``samples`` frame indexes spread evenly over 0..count-1; with ``odd`` an odd
+    number of them (``samples`` rounded up, ``count`` down), as the median needs."""
+    k = min(samples, count)
+    if odd:
+        k = min(samples + (samples % 2 == 0), count - (count % 2 == 0))
+    # floor(x + 0.5), not round(): banker's rounding could merge neighbours 1 apart.
+    return sorted({int(np.floor(x + 0.5)) for x in np.linspace(0, count - 1, max(k, 1))})
+
+
+def _ranges(frames: list[int], step: int) -> str:
+    """'0-4, 9, 12-20' for processed frames (consecutive when ``step`` apart)."""
+    parts: list[str] = []
+    start = prev = None
+    for f in frames:
+        if start is None:
+            start = prev = f
+        elif f == prev + step:
+            prev = f
+        else:
+            parts.append(f"{start}" if start == prev else f"{start}-{prev}")
+            start = prev = f
+    if start is not None:
+        parts.append(f"{start}" if start == prev else f"{start}-{prev}")
+    return ", ".join(parts)
+
+
+def _touches_border(mask: np.ndarray, box: tuple[int, int, int, int]) -> bool:
+    x0, y0, x1, y1 = box
+    inner = mask[y0:y1, x0:x1]
+    return bool(inner[0].any() or inner[-1].any() or inner[:, 0].any() or inner[:, -1].any())
+
+
+def _upstream_fingerprint(ws: Workspace, cameras: list[Camera]) -> str:
+    record = ws.step(INIT_STEP)
+    if record is not None:
+        return record.fingerprint
+    # A workspace not made by init-video: its cameras and the videos' identities.
+    videos = {}
+    for camera in cameras:
+        stat = video_path(ws, camera.name).stat()
+        videos[camera.name] = [stat.st_size, stat.st_mtime_ns]
+    return fingerprint(ws.cameras_path.read_text(), videos)
+
+
+def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: bool = False
+                     ) -> StepRecord:  # fmt: skip
+    """Silhouettes of every camera's processed frames in ``WS/silhouettes`` (module docstring);
+    reused when the config and the videos are unchanged, unless ``overwrite``."""
+    from recon import recording
+
+    ws = Workspace.open_video(ws.root)
+    cameras = workspace_cameras(ws)
+    counts = {c.name: video_info(video_path(ws, c.name)) for c in cameras}
+    n_frames = min(info[0] for info in counts.values())
+    if any(info[0] != n_frames for info in counts.values()):
+        listed = ", ".join(f"{name} {info[0]}" for name, info in counts.items())
+        raise UserError(f"the workspace's videos have different frame counts ({listed})")
+    last = n_frames - 1 if config.last is None else config.last
+    if config.first > n_frames - 1 or last > n_frames - 1:
+        bad = "--first" if config.first > n_frames - 1 else "--last"
+        raise UserError(f"{bad} {config.first if bad == '--first' else last} is past the last "
+                        f"frame {n_frames - 1} of the videos")
+    frames = list(range(config.first, last + 1, config.frame_step))
+    span = config.background_frames
+    if span is not None:
+        if span[1] > n_frames - 1:
+            raise UserError(f"--background {config.background}: the videos end at frame "
+                            f"{n_frames - 1}")
+        # At most background_samples of them, spread evenly: they are held in memory at once.
+        background_frames = [span[0] + i for i in
+                             _spread(span[1] - span[0] + 1, config.background_samples, odd=False)]
+        background_text = (f"mean and spread of {len(background_frames)} empty-scene frames "
+                           f"in {span[0]}-{span[1]}")
+    else:
+        background_frames = _spread(n_frames, config.background_samples, odd=True)
+        background_text = (f"temporal median of {len(background_frames)} frames spread over "
+                           f"0-{n_frames - 1}")
+    photos = (background_images(config.background_images, cameras)
+              if config.background_images is not None else {})
+    settings = {**dataclasses.asdict(config), "last": last}
+    fp = fingerprint(STEP, settings, _upstream_fingerprint(ws, cameras),
+                     {name: hashlib.sha256(path.read_bytes()).hexdigest()
+                      for name, path in photos.items()})
+    outputs = [ws.silhouettes_dir / c.name for c in cameras]
+    if done := ws.reusable(STEP, fp, *outputs, overwrite=overwrite):
+        return dataclasses.replace(done, summary={**done.summary, "up_to_date": True})
+
+    fps = {name: info[3] for name, info in counts.items()}
+    logged = ({frames[i] for i in _spread(len(frames), config.logged_frames, odd=False)}
+              if config.logged_frames else set())
+    check = config.hull.multi_view_check and len(cameras) >= 2
+    per_camera: dict[str, dict[str, Any]] = {}
+    warnings: list[str] = []
+    map_cameras = _camera_map.get()
+    units = len(frames) * (len(cameras) + check)
+    with (Timer() as timer, bar(units, "silhouettes", "frame") as progress,
+          atomic_output(ws.silhouettes_dir) as tmp,
+          recording.step_recording(ws.log_path(STEP), STEP) as rec):
+        tmp.mkdir()
+        recording.log_silhouette_context(rec, "world/cameras")
+        jobs = [_CameraJob(root=ws.root.resolve(), camera=camera, frames=frames,
+                           background_frames=background_frames, median=span is None,
+                           thresholds=config.thresholds, out=tmp.resolve() / camera.name,
+                           passes=config.background_passes,
+                           background_image=photos.get(camera.name))
+                for camera in cameras]
+        if map_cameras is not None:
+            done = _silhouettes_as_tasks(map_cameras, jobs)
+            progress.update(len(frames) * len(cameras))
+        else:  # one camera after the other in this process
+            done = [camera_silhouettes(job, progress) for job in jobs]
+        if check:
+            progress.set_postfix_str("multi-view check")
+            done = _checked_by_hull(map_cameras, _HullJob(
+                root=ws.root.resolve(), cameras=cameras, outs=[job.out for job in jobs],
+                frames=frames, config=config.hull), done, progress)
+        for camera, result in zip(cameras, done, strict=True):
+            if result.background.unknown is not None:
+                _write_mask(tmp / camera.name / UNKNOWN_NAME, result.background.unknown)
+            _log_camera(rec, ws, camera, result, tmp / camera.name, sorted(logged), frames,
+                        fps[camera.name])
+            fractions, empty, border = (result.masks.fractions, result.masks.empty,
+                                        result.masks.border)
+            per_camera[camera.name] = {
+                "frames": len(fractions),
+                "foreground_fraction": {"min": min(fractions), "median":
+                                        float(np.median(fractions)), "max": max(fractions)},
+                "empty_frames": empty, "border_frames": border}
+            if result.removed is not None:
+                per_camera[camera.name]["hull_removed"] = {
+                    "median": float(np.median(result.removed)), "max": max(result.removed)}
+            photo = result.background.photo
+            if photo is not None:
+                per_camera[camera.name]["background_image"] = photo
+                if photo["gain"] is None:
+                    warnings.append(
+                        f"{camera.name}: background image {photo['image']} agrees with the "
+                        f"video on only {photo['agreement']:.0%} of the pixels away from the "
+                        "subject (another camera's, or the camera moved?): not used")
+            elif photos:
+                warnings.append(f"{camera.name}: no background image in "
+                                f"{config.background_images}: the temporal median alone")
+            warnings.extend(_warnings(camera.name, empty, border, len(fractions),
+                                      config.frame_step, span is None))
+        recording.log_table(rec, "silhouettes/summary", "Foreground fraction per camera", [
+            {"camera": name, "min": s["foreground_fraction"]["min"],
+             "median": s["foreground_fraction"]["median"], "max": s["foreground_fraction"]["max"],
+             "empty": len(s["empty_frames"]), "at border": len(s["border_frames"])}
+            for name, s in per_camera.items()])
+    if photos:
+        background_text += (f", with the photos of {config.background_images} where the "
+                            "subject moved")
+    summary = {"cameras": per_camera, "frames": [config.first, last, config.frame_step],
+               "processed": len(frames), "background": background_text,
+               "background_frames": background_frames, "multi_view_check": check,
+               "warnings": warnings}
+    return ws.record_step(STEP, fp, config=settings, seconds=timer.seconds, summary=summary)
+
+
+def _log_camera(rec: Any, ws: Workspace, camera: Camera, result: _CameraResult, masks: Path,
+                logged: list[int], frames: list[int], fps: float) -> None:  # fmt: skip
+    """One camera's part of the recording: the camera, its background (and its pixels of
+    unknown background), the logged frames with their final masks, and the foreground
+    fraction over frames."""
+    from recon import recording
+
+    entity = f"world/cameras/{recording.entity_name(camera.name)}"
+    recording.log_camera_image(rec, image_name=camera.name, image_path=None, K=camera.K,
+                               width=camera.width, height=camera.height,
+                               cam_from_world=camera.cam_from_world)
+    recording.log_frame_image(rec, f"backgrounds/{recording.entity_name(camera.name)}",
+                              np.clip(result.background.model.mean, 0, 255).astype(np.uint8))
+    if result.background.unknown is not None:
+        recording.log_frame_image(rec, f"backgrounds/{recording.entity_name(camera.name)}"
+                                  "/unknown", result.background.unknown.astype(np.uint8) * 255)
+    for index, frame in read_frames(ws, camera.name, logged):
+        time_s = index / fps if fps else None
+        mask = cv2.imread(str(masks / f"{index:06d}.png"), cv2.IMREAD_GRAYSCALE) > 127
+        recording.log_frame_image(rec, f"{entity}/image", frame, index, time_s)
+        recording.log_silhouette(rec, f"{entity}/image/silhouette", mask, index, time_s or 0.0)
+    rate = fps or 1.0
+    recording.log_frame_series(rec, f"silhouettes/{recording.entity_name(camera.name)}"
+                               "/foreground_fraction", np.asarray(frames),
+                               np.asarray(frames) / rate, np.asarray(result.masks.fractions))
+
+
+CameraMap = Callable[..., list[Any]]
+"""``map_fn(fn, items, *shared)`` returning ``[fn(item, *shared) for item in items]`` in input
+order, however it runs them (:func:`recon.batch.map_ordered` runs them as Dask tasks, ``shared``
+sent once rather than with every task)."""
+
+# Unset (None) in a plain run: the cameras are processed one after another in this process.
+_camera_map: contextvars.ContextVar[CameraMap | None] = contextvars.ContextVar(
+    "silhouette_camera_map", default=None)
+
+FRAME_CHUNK = 12
+"""Processed frames of one camera per classification task under `mocap batch`, at most unless a
+long sequence needs longer runs (:func:`frame_chunks`): 1088x1920 frames take ~75 ms each to
+classify, so a task is about a second."""
+_REDECODED_PER_FRAME = 4
+"""Budget of :func:`frame_chunks`: video frames decoded again, over all of a camera's tasks, per
+processed frame. A task reads its frames with :func:`tracking.rig.video.read_frames`, which decodes
+(without converting) every frame before its first one: exact whatever the video's timestamps,
+where seeking trusts them. Such a frame costs ~3 ms against ~80 ms to decode, convert and
+classify a processed one (H.264 1088x1920, the Pose2Sim demo, one thread), so the budget bounds
+the extra work at about 15% however long the sequence."""
+
+
+@contextlib.contextmanager
+def cameras_mapped_by(map_fn: CameraMap) -> Iterator[None]:
+    """Within this block, :func:`make_silhouettes` hands its work to ``map_fn`` in two fan-outs:
+    the background model of each camera (:func:`camera_background`, a task per camera), then the
+    classification of each camera's frames in consecutive runs (:func:`frame_silhouettes`, a
+    task per run of :func:`frame_chunks`, every camera's runs in one fan-out), each writing its
+    masks into the partial folder, with the cameras' models as ``map_fn``'s shared argument.
+
+    Like :func:`recon.dense.backends.stereo_pairs_mapped_by`: how the work is scheduled changes no
+    output; the results are merged in camera and frame order, as a plain run makes them, and
+    the masks still replace ``silhouettes/`` only when every task is done.
+    """
+    token = _camera_map.set(map_fn)
+    try:
+        yield
+    finally:
+        _camera_map.reset(token)
+
+
+def frame_chunks(frames: list[int]) -> list[list[int]]:
+    """``frames`` (one camera's processed frame indexes, increasing) split into consecutive runs
+    of at most :data:`FRAME_CHUNK`, as even as can be; fewer, longer runs when so many would
+    decode the video's early frames again too often (:data:`_REDECODED_PER_FRAME`): a run
+    starting at frame s decodes the s frames before it, so n runs decode about (n - 1) / 2 times
+    the video up to the last processed frame more than a single run does."""
+    if not frames:
+        return []
+    count = -(-len(frames) // FRAME_CHUNK)
+    affordable = 1 + 2 * _REDECODED_PER_FRAME * len(frames) // (frames[-1] + 1)
+    count = max(1, min(count, affordable))
+    bounds = [len(frames) * k // count for k in range(count + 1)]
+    return [frames[a:b] for a, b in itertools.pairwise(bounds)]
+
+
+@dataclass(frozen=True)
+class _CameraJob:
+    """One camera's share of :func:`make_silhouettes`; small and picklable."""
+
+    root: Path
+    camera: Camera
+    frames: list[int]
+    background_frames: list[int]
+    median: bool
+    thresholds: SilhouetteConfig
+    out: Path
+    passes: int = 2
+    background_image: Path | None = None
+
+    def frames_job(self, frames: list[int], model: int = 0) -> _FramesJob:
+        """The classification of ``frames`` (some of ``self.frames``) against the ``model``-th
+        of the background models given with it."""
+        return _FramesJob(root=self.root, camera=self.camera, frames=frames,
+                          thresholds=self.thresholds, out=self.out, model=model)
+
+
+@dataclass(frozen=True)
+class _FramesJob:
+    """Some of one camera's processed frames to classify (all of them in a plain run, one run
+    of :func:`frame_chunks` under `mocap batch`); small and picklable."""
+
+    root: Path
+    camera: Camera
+    frames: list[int]
+    thresholds: SilhouetteConfig
+    out: Path
+    model: int
+    """Which of the background models given with the job is this camera's."""
+
+
+@dataclass(frozen=True)
+class _HullJob:
+    """Some processed frames whose silhouettes, all cameras' at once, go through the
+    multi-view check (:func:`frames_consistency`); small and picklable."""
+
+    root: Path
+    cameras: list[Camera]
+    outs: list[Path]
+    frames: list[int]
+    config: HullCheckConfig
+
+
+@dataclass(frozen=True)
+class _Background:
+    model: BackgroundModel
+    photo: dict[str, Any] | None
+    """:func:`with_background_photo`'s account, with the image's name; None without a photo."""
+    unknown: np.ndarray | None = None
+    """(H, W) bool: pixels whose background is unknown (:func:`with_background_photo`)."""
+
+
+@dataclass(frozen=True)
+class _FramesResult:
+    """Per processed frame of one camera, in order: the silhouette's fraction of the image;
+    the frames whose silhouette is empty, and those where it touches the image border."""
+
+    fractions: list[float]
+    empty: list[int]
+    border: list[int]
+
+    @classmethod
+    def joined(cls, parts: Sequence[_FramesResult]) -> _FramesResult:
+        """The results of consecutive runs of frames as one."""
+        return cls([f for p in parts for f in p.fractions], [i for p in parts for i in p.empty],
+                   [i for p in parts for i in p.border])
+
+
+@dataclass(frozen=True)
+class _CameraResult:
+    background: _Background
+    masks: _FramesResult
+    """Statistics of the final masks."""
+    removed: list[float] | None = None
+    """Per frame, the fraction of the silhouette the multi-view check removed (None: no check)."""
+
+
+def _stats(index: int, mask: np.ndarray, box: tuple[int, int, int, int], into: _FramesResult
+           ) -> None:  # fmt: skip
+    fraction = float(mask.mean())
+    into.fractions.append(fraction)
+    if fraction == 0.0:
+        into.empty.append(index)
+    elif _touches_border(mask, box):
+        into.border.append(index)
+
+
+def camera_silhouettes(job: _CameraJob, progress: Any = None) -> _CameraResult:
+    """The masks of one camera's frames written to ``job.out``, all in this process: its
+    background model, then its frames in order (what a plain `mocap silhouettes` runs)."""
+    if progress is not None:
+        progress.set_postfix_str(f"{job.camera.name}: background")
+    background = camera_background(job)
+    if progress is not None:
+        progress.set_postfix_str(job.camera.name)
+    job.out.mkdir()
+    return _CameraResult(background, frame_silhouettes(job.frames_job(job.frames),
+                                                       [background.model], progress))
+
+
+def camera_background(job: _CameraJob) -> _Background:
+    """The background model of one camera: one independent task."""
+    ws = Workspace(job.root)
+    frames = [frame for _, frame in read_frames(ws, job.camera.name, job.background_frames)]
+    for frame in frames:
+        if frame.shape[:2] != (job.camera.height, job.camera.width):
+            raise UserError(f"video {video_path(ws, job.camera.name).name} is "
+                            f"{frame.shape[1]}x{frame.shape[0]} but cameras.json says "
+                            f"{job.camera.width}x{job.camera.height} for camera {job.camera.name}")
+    if not job.median:
+        return _Background(BackgroundModel.from_frames(frames), None)
+    model = median_background(frames, job.thresholds, job.passes)
+    if job.background_image is None:
+        return _Background(model, None)
+    photo = read_background_image(job.background_image, job.camera)
+    model, unknown, account = with_background_photo(model, frames, photo, job.thresholds)
+    return _Background(model, {"image": job.background_image.name, **account},
+                       unknown if unknown.any() else None)
+
+
+def frame_silhouettes(job: _FramesJob, models: Sequence[BackgroundModel], progress: Any = None
+                      ) -> _FramesResult:  # fmt: skip
+    """The masks of ``job.frames`` written to ``job.out`` (which exists), classified against
+    ``models[job.model]``: one independent task."""
+    ws = Workspace(job.root)
+    model = models[job.model]
+    box = content_box(ws, job.camera)
+    result = _FramesResult([], [], [])
+    for index, frame in read_frames(ws, job.camera.name, job.frames):
+        mask = silhouette_from_frame(frame, model, job.thresholds)
+        _write_mask(job.out / f"{index:06d}.png", mask)
+        _stats(index, mask, box, result)
+        if progress is not None:
+            progress.update()
+    return result
+
+
+def frames_consistency(job: _HullJob, unknowns: Sequence[np.ndarray | None],
+                       progress: Any = None) -> tuple[list[_FramesResult], list[list[float]]]:
+    """The multi-view check (`tracking.silhouettes.hull`) of ``job.frames``: every camera's mask
+    read from
+    its folder and rewritten when the check changed it (`unknowns`: each camera's pixels of
+    unknown background, which do not carve): one independent task. Per camera, the
+    statistics of the final masks and the fraction of the silhouette removed per frame."""
+    ws = Workspace(job.root)
+    boxes = [content_box(ws, camera) for camera in job.cameras]
+    results = [_FramesResult([], [], []) for _ in job.cameras]
+    removed: list[list[float]] = [[] for _ in job.cameras]
+    for index in job.frames:
+        paths = [out / f"{index:06d}.png" for out in job.outs]
+        masks = [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) > 127 for p in paths]
+        kept = consistent_silhouettes(job.cameras, masks, job.config, boxes, unknowns)
+        for k, (path, mask, final) in enumerate(zip(paths, masks, kept, strict=True)):
+            before = int(mask.sum())
+            if not np.array_equal(final, mask):
+                _write_mask(path, final)
+            removed[k].append(float((mask & ~final).sum() / before) if before else 0.0)
+            _stats(index, final, boxes[k], results[k])
+        if progress is not None:
+            progress.update()
+    return results, removed
+
+
+def _write_mask(path: Path, mask: np.ndarray) -> None:
+    if not cv2.imwrite(str(path), mask.astype(np.uint8) * 255):
+        raise UserError(f"could not write {path}")
+
+
+def _silhouettes_as_tasks(map_fn: CameraMap, jobs: list[_CameraJob]) -> list[_CameraResult]:
+    """:func:`camera_silhouettes` of every job, as the fan-outs of :func:`cameras_mapped_by`."""
+    backgrounds = map_fn(camera_background, jobs)
+    for job in jobs:
+        job.out.mkdir()
+    runs = [frame_chunks(job.frames) for job in jobs]
+    results = iter(map_fn(frame_silhouettes, [
+        job.frames_job(frames, model=k) for k, job in enumerate(jobs) for frames in runs[k]],
+        tuple(b.model for b in backgrounds)))
+    return [_CameraResult(b, _FramesResult.joined([next(results) for _ in camera_runs]))
+            for b, camera_runs in zip(backgrounds, runs, strict=True)]
+
+
+def _checked_by_hull(map_fn: CameraMap | None, job: _HullJob, done: list[_CameraResult],
+                     progress: Any) -> list[_CameraResult]:  # fmt: skip
+    """``done`` after the multi-view check of every processed frame: in this process, or as a
+    task per run of frames (:func:`frame_chunks`) under `mocap batch`."""
+    unknowns = tuple(result.background.unknown for result in done)
+    if map_fn is None:
+        parts = [frames_consistency(job, unknowns, progress)]
+    else:
+        parts = map_fn(frames_consistency, [dataclasses.replace(job, frames=run)
+                                            for run in frame_chunks(job.frames)], unknowns)
+        progress.update(len(job.frames))
+    return [dataclasses.replace(
+        result, masks=_FramesResult.joined([p[0][k] for p in parts]),
+        removed=[r for p in parts for r in p[1][k]]) for k, result in enumerate(done)]
+
+
+def _warnings(name: str, empty: list[int], border: list[int], processed: int, step: int,
+              median: bool) -> list[str]:  # fmt: skip
+    out = []
+    if empty and len(empty) == processed:
+        hint = (" with a median background a subject who hardly moves is background: give "
+                "frames of the empty scene with --background frames:A-B" if median else "")
+        out.append(f"{name}: every silhouette is empty (is the subject in view?{hint})")
+    elif empty:
+        out.append(f"{name}: empty silhouette in frame(s) {_ranges(empty, step)} (subject out "
+                   "of view?)")
+    if border:
+        out.append(f"{name}: silhouette touches the image border in frame(s) "
+                   f"{_ranges(border, step)} (subject leaving the view?)")
+    return out
+
+
+def summary_lines(ws: Workspace, record: StepRecord) -> list[str]:
+    """What `mocap silhouettes` prints: counts, per-camera fractions, warnings, paths."""
+    s = record.summary
+    first, last, step = s["frames"]
+    every = f", every {step}th" if step > 1 else ""
+    took = "up to date" if s.get("up_to_date") else f"{record.seconds:.1f} s"
+    lines = [f"silhouettes  {len(s['cameras'])} cameras x {s['processed']} frames ({first}-{last}"
+             f"{every}) in {ws.silhouettes_dir} ({took})",
+             f"background   {s['background']}"]
+    for name, cam in s["cameras"].items():
+        f = cam["foreground_fraction"]
+        line = (f"{name:<12} foreground {f['median']:.1%} of the image (median; min "
+                f"{f['min']:.1%}, max {f['max']:.1%})")
+        if "hull_removed" in cam:
+            line += f"; the multi-view check removed {cam['hull_removed']['median']:.1%}"
+        photo = cam.get("background_image")
+        if photo is not None and photo["gain"] is not None:
+            line += (f"; photo on {photo['area']:.1%} of the image, background unknown on "
+                     f"{photo['unknown']:.1%}")
+        lines.append(line)
+    lines += [f"warning      {w}" for w in s["warnings"]]
+    lines.append(f"recording    {ws.logs_dir / f'{STEP}.rrd'}")
+    return lines

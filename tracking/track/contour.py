@@ -1,0 +1,368 @@
+"""Joint refinement of the pose against the silhouette outlines (damped Gauss-Newton).
+
+The hierarchy of thesis 6.2.5 (`tracking.track.tracker`) solves one part of the body at a time with
+the rest held still, so a parameter the silhouettes hardly constrain alone (pelvis pitch
+against hip flexion and spine bend; pelvis yaw against limb twists) drifts and the stages that
+follow compensate. This module moves all parameters together, in the spirit of contour-based
+trackers (Rosenhahn et al.; Gall et al.): per view,
+
+* model to image: the occluding-contour vertices of the model (surface normal nearly
+  perpendicular to the viewing ray, and projected on the outline of the rendered model
+  silhouette) should lie on the image silhouette's outline: residual = signed distance of
+  their projection to the image outline (positive outside the image silhouette);
+* image to model: every point of the image silhouette's outer outline should have a model
+  contour vertex on it: residual = 2-D offset to the nearest projected contour vertex.
+
+Residuals are in pixels of the pyramid level used, weighted by a Cauchy loss, and derivatives
+are analytic (`tracking.body.model.pose_derivative_axes`; the projection's derivative ignores lens
+distortion, the projection itself does not). Steps are Levenberg-Marquardt steps accepted
+only when the XOR energy (`tracking.track.energy`, the tracker's objective) goes down, so the
+refinement can never make a frame worse in the thesis' own measure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from scipy.spatial import cKDTree
+
+from tracking.body.model import (
+    LOWER_LIMITS,
+    PARAM_MOVES_NODE,
+    POSE_LAYOUT,
+    UPPER_LIMITS,
+    BodyModel,
+    BodyShape,
+    Pose,
+    pose_derivative_axes,
+    scaled_shape,
+)
+from tracking.rig.cameras import Camera
+
+
+@dataclass(frozen=True, kw_only=True)
+class ContourConfig:
+    iterations: int = field(default=8, metadata={"help": "Gauss-Newton iterations"})
+    robust_px: float = field(
+        default=3.0, metadata={"help": "Cauchy scale of the outline residuals, pixels"}
+    )
+    grazing: float = field(
+        default=0.35,
+        metadata={"help": "a vertex is an occluding-contour candidate when |normal . ray| is "
+                  "below this"},
+    )  # fmt: skip
+    hole_fraction: float = field(
+        default=0.02,
+        metadata={"help": "holes in an image silhouette smaller than this fraction of its "
+                  "area are filled before its outline is taken"},
+    )  # fmt: skip
+    outline_step_px: int = field(
+        default=2, metadata={"help": "take every n-th pixel of the image outlines"}
+    )
+
+
+class _ViewTarget:
+    """What one view's image silhouette offers: its signed distance field (pixels, positive
+    outside), the field's gradient, and the points of its outer outline."""
+
+    def __init__(self, camera: Camera, mask: np.ndarray, config: ContourConfig,
+                 known: np.ndarray | None = None) -> None:  # fmt: skip
+        self.camera = camera
+        self.known = known  # pixels whose label counts (None: all)
+        mask = np.asarray(mask, dtype=np.uint8)
+        contours, hierarchy = cv2.findContours(mask, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+        filled = mask.copy()
+        area = max(int(mask.sum()), 1)
+        outer = []
+        if hierarchy is not None:
+            for contour, (_, _, _, parent) in zip(contours, hierarchy[0], strict=True):
+                if parent >= 0:  # a hole: fill it when small (silhouette noise)
+                    if cv2.contourArea(contour) < config.hole_fraction * area:
+                        cv2.drawContours(filled, [contour], -1, 1, -1)
+                else:
+                    outer.append(contour[:, 0, :])
+        self.mask = filled.astype(bool)
+        inside = cv2.distanceTransform(filled, cv2.DIST_L2, 5)
+        outside = cv2.distanceTransform(1 - filled, cv2.DIST_L2, 5)
+        # Half a pixel each side: the outline lies between a foreground and a background pixel.
+        sdf = np.where(filled > 0, 0.5 - inside, outside - 0.5).astype(np.float32)
+        self.sdf = sdf
+        self.grad_u = cv2.Sobel(sdf, cv2.CV_32F, 1, 0, ksize=3) / 8.0
+        self.grad_v = cv2.Sobel(sdf, cv2.CV_32F, 0, 1, ksize=3) / 8.0
+        points = (np.concatenate(outer)[:: max(config.outline_step_px, 1)].astype(float) + 0.5
+                  if outer else np.zeros((0, 2)))  # fmt: skip
+        if known is not None and len(points):
+            # An outline along unknown pixels is where the view could not tell, not an edge.
+            pixel = np.floor(points).astype(int)
+            points = points[known[pixel[:, 1], pixel[:, 0]]]
+        self.outline = points  # (N, 2) pixel coordinates (centres at +0.5)
+
+    def sample(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Bilinear SDF (N,) and gradient (N, 2) at pixel coordinates uv (N, 2)."""
+        h, w = self.sdf.shape
+        x = np.clip(uv[:, 0] - 0.5, 0, w - 1.001)
+        y = np.clip(uv[:, 1] - 0.5, 0, h - 1.001)
+        x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+        fx, fy = x - x0, y - y0
+
+        def bilinear(image: np.ndarray) -> np.ndarray:
+            return ((1 - fy) * ((1 - fx) * image[y0, x0] + fx * image[y0, x0 + 1])
+                    + fy * ((1 - fx) * image[y0 + 1, x0] + fx * image[y0 + 1, x0 + 1]))
+
+        return bilinear(self.sdf), np.stack([bilinear(self.grad_u), bilinear(self.grad_v)], 1)
+
+
+def _projection_derivative(camera: Camera, points: np.ndarray) -> np.ndarray:
+    """(N, 2, 3) derivative of the pixel position with respect to the world point (the
+    pinhole part of the projection: distortion changes it by far less than the step)."""
+    in_cam = points @ camera.R.T + camera.t
+    z = in_cam[:, 2]
+    fx, fy = camera.K[0, 0], camera.K[1, 1]
+    d = np.zeros((len(points), 2, 3))
+    d[:, 0, 0] = fx / z
+    d[:, 0, 2] = -fx * in_cam[:, 0] / z**2
+    d[:, 1, 1] = fy / z
+    d[:, 1, 2] = -fy * in_cam[:, 1] / z**2
+    return d @ camera.R
+
+
+class _Posed:
+    """A model in a pose: world vertices and normals, and the derivatives of the vertices with
+    respect to the pose parameters `free` (and to any `extra` columns, e.g. shape scales)."""
+
+    def __init__(self, model: BodyModel, x: np.ndarray, free: np.ndarray,
+                 extra: np.ndarray | None = None) -> None:  # fmt: skip
+        node = model.node_of_segment[model.segment_of_vertex]
+        world, self.axes, self.pivots = pose_derivative_axes(Pose(x), model.shape)
+        rot = world[node, :3, :3]
+        self.verts = np.einsum("vij,vj->vi", rot, model.vertex_in_node) + world[node, :3, 3]
+        self.normals = np.einsum("vij,vj->vi", rot, model.vertex_normals_in_node)
+        self.moves = PARAM_MOVES_NODE[free][:, node]  # (P, V)
+        self.free = free
+        self.extra = extra  # (V, 3, E) or None
+
+    @property
+    def columns(self) -> int:
+        return len(self.free) + (0 if self.extra is None else self.extra.shape[2])
+
+    def derivatives(self, idx: np.ndarray) -> np.ndarray:
+        """(n, 3, columns) derivatives of the vertices idx: extra columns first, then pose."""
+        e = 0 if self.extra is None else self.extra.shape[2]
+        out = np.zeros((len(idx), 3, self.columns))
+        if e:
+            out[:, :, :e] = self.extra[idx]
+        verts = self.verts[idx]
+        for col, k in enumerate(self.free):
+            on = self.moves[col, idx]
+            if _ROTATION[k]:
+                out[on, :, e + col] = np.cross(self.axes[k], verts[on] - self.pivots[k])
+            else:
+                out[on, :, e + col] = self.axes[k]
+        return out
+
+
+_ROTATION = np.array([p.kind == "rotation" for p in POSE_LAYOUT])
+
+
+def _outline_system(posed: _Posed, cameras: Sequence[Camera], targets: Sequence[_ViewTarget],
+                    model_masks: Sequence[np.ndarray], config: ContourConfig,
+                    ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Gauss-Newton normal equations (A, b) of one frame's outline residuals (module
+    docstring) over the columns of `posed`."""
+    n = posed.columns
+    a, b = np.zeros((n, n)), np.zeros(n)
+    scale = config.robust_px
+    for cam, target, model_mask in zip(cameras, targets, model_masks, strict=True):
+        ray = posed.verts - cam.center_in_world
+        ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+        grazing = np.abs(np.sum(ray * posed.normals, axis=1)) < config.grazing
+        uv, depth = cam.project(posed.verts)
+        h, w = model_mask.shape
+        with np.errstate(invalid="ignore"):
+            col, row = np.floor(uv[:, 0]), np.floor(uv[:, 1])
+            ok = grazing & (depth > 0) & (col >= 1) & (col < w - 1) & (row >= 1) & (row < h - 1)
+        # Contour vertices: on the outline of the model's own silhouette, i.e. with some
+        # background pixel next to them (the rest are hidden behind other parts).
+        idx = np.flatnonzero(ok)
+        c, r = col[idx].astype(int), row[idx].astype(int)
+        near_bg = np.zeros(len(idx), bool)
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                near_bg |= ~model_mask[r + dr, c + dc]
+        idx = idx[near_bg]
+        if target.known is not None:
+            idx = idx[target.known[row[idx].astype(int), col[idx].astype(int)]]
+        if len(idx) == 0:
+            continue
+        duv = np.einsum("nij,njk->nik", _projection_derivative(cam, posed.verts[idx]),
+                        posed.derivatives(idx))  # (n, 2, columns)  # fmt: skip
+        # Model -> image: signed distance of each contour point to the image outline.
+        sdf, grad = target.sample(uv[idx])
+        jac = np.einsum("ni,nik->nk", grad, duv)
+        weight = 1.0 / (1.0 + (sdf / scale) ** 2)
+        a += (jac * weight[:, None]).T @ jac
+        b += (jac * weight[:, None]).T @ sdf
+        # Image -> model: each outline point to its nearest projected contour point.
+        if len(target.outline):
+            dist, nearest = cKDTree(uv[idx]).query(target.outline)
+            res = uv[idx][nearest] - target.outline
+            weight = 1.0 / (1.0 + (dist / scale) ** 2)
+            jac2 = duv[nearest]
+            a += np.einsum("m,mik,mil->kl", weight, jac2, jac2)
+            b += np.einsum("m,mik,mi->k", weight, jac2, res)
+    return a, b
+
+
+def _damped_steps(a: np.ndarray, b: np.ndarray, lam: float) -> np.ndarray | None:
+    """Levenberg-Marquardt step -(A + lam diag(A))^-1 b, or None when singular."""
+    diag = np.diag(a) + 1e-9 * max(np.trace(a), 1e-12) / len(a)
+    try:
+        return -np.linalg.solve(a + lam * np.diag(diag) + 1e-12 * np.eye(len(a)), b)
+    except np.linalg.LinAlgError:
+        return None
+
+
+def _accepted_step(a: np.ndarray, b: np.ndarray, z: np.ndarray, bounds: tuple[np.ndarray,
+                   np.ndarray], lam: float, best: float, cost: Callable[[np.ndarray], float],
+                   ) -> tuple[np.ndarray | None, float, float, int]:  # fmt: skip
+    """Up to three damped steps from z within bounds, the damping raised tenfold after each
+    rejected one: (the first whose cost is below `best`, or None; its cost; the damping for
+    the next iteration; the number of cost evaluations)."""
+    evaluations = 0
+    for _attempt in range(3):
+        step = _damped_steps(a, b, lam)
+        if step is None:
+            lam *= 10
+            continue
+        y = np.clip(z + step, *bounds)
+        e = cost(y)
+        evaluations += 1
+        if e < best:
+            return y, e, max(lam / 3, 1e-4), evaluations
+        lam *= 10
+    return None, best, lam, evaluations
+
+
+class _FrameOutlines:
+    """One frame's image outlines at one pyramid level."""
+
+    def __init__(self, cameras: Sequence[Camera], masks: Sequence[np.ndarray],
+                 config: ContourConfig, known: Sequence[np.ndarray | None] | None = None,
+                 ) -> None:  # fmt: skip
+        self.cameras = list(cameras)
+        known = list(known) if known is not None else [None] * len(self.cameras)
+        self.targets = [_ViewTarget(c, m, config, k) for c, m, k in
+                        zip(self.cameras, masks, known, strict=True)]  # fmt: skip
+
+    def system(self, model: BodyModel, x: np.ndarray, free: np.ndarray, renderer: object,
+               config: ContourConfig,
+               extra: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+        from tracking.track.render import render_views
+
+        posed = _Posed(model, x, free, extra)
+        masks = render_views(renderer, posed.verts, model.faces, self.cameras)
+        return _outline_system(posed, self.cameras, self.targets, masks, config)
+
+
+class ContourRefiner:
+    """Refines poses of `model` against one frame's silhouettes (`masks`, one per camera, the
+    cameras of the pyramid level to use; `known`: per view, None or the pixels that count)."""
+
+    def __init__(self, model: BodyModel, cameras: Sequence[Camera], masks: Sequence[np.ndarray],
+                 renderer: object, config: ContourConfig | None = None,
+                 known: Sequence[np.ndarray | None] | None = None) -> None:  # fmt: skip
+        self.model, self.renderer = model, renderer
+        self.config = config or ContourConfig()
+        self.frame = _FrameOutlines(cameras, masks, self.config, known)
+
+    def refine(self, x: np.ndarray, free: Sequence[int], energy: Callable[[np.ndarray], float],
+               prior: tuple[np.ndarray, np.ndarray] | None = None,
+               ) -> tuple[np.ndarray, float, int]:  # fmt: skip
+        """Levenberg-Marquardt on the outline residuals over the `free` parameters, each step
+        accepted only when `energy` (of a full parameter vector) decreases.
+
+        prior: (centre, weight) per parameter, adding weight (x - centre)^2 (squared pixels)
+        to the least-squares cost: a pull on directions the outlines do not fix.
+        Returns the parameters, their energy and the number of energy evaluations.
+        """
+        free = np.asarray(free)
+        x = np.clip(np.asarray(x, float).copy(), LOWER_LIMITS, UPPER_LIMITS)
+        best = energy(x)
+        evaluations = 1
+        lam = 1e-2
+
+        def cost(values: np.ndarray) -> float:
+            y = x.copy()
+            y[free] = values
+            return energy(y)
+
+        for _ in range(self.config.iterations):
+            a, b = self.frame.system(self.model, x, free, self.renderer, self.config)
+            if prior is not None:
+                centre, weight = prior
+                a = a + np.diag(weight[free])
+                b = b + weight[free] * (x[free] - centre[free])
+            values, best, lam, n = _accepted_step(a, b, x[free], (LOWER_LIMITS[free],
+                                                  UPPER_LIMITS[free]), lam, best, cost)  # fmt: skip
+            evaluations += n
+            if values is None:
+                break
+            x = x.copy()
+            x[free] = values
+        return x, best, evaluations
+
+
+def refine_shape(base: BodyShape, scales: np.ndarray, frames: Sequence[tuple[Sequence[Camera],
+                 Sequence[np.ndarray], Sequence[np.ndarray | None]]],
+                 poses: Sequence[np.ndarray], renderer: object,
+                 energy: Callable[[BodyModel, Sequence[np.ndarray]], float],
+                 config: ContourConfig | None = None, bounds: tuple[float, float] = (0.6, 1.5),
+                 ) -> tuple[np.ndarray, list[np.ndarray], float]:  # fmt: skip
+    """The shape scales (`tracking.body.model.SHAPE_GROUPS` of `base`) and the poses of several
+    frames together against their outlines; frames: (cameras, masks, known) per frame (known:
+    per view, None or the pixels that count).
+
+    energy(model, poses): the XOR energy summed over the frames, which every accepted step
+    lowers. Shape derivatives are forward differences of the vertices. Returns the scales,
+    the poses and their energy.
+    """
+    cfg = config or ContourConfig()
+    outlines = [_FrameOutlines(c, m, cfg, k) for c, m, k in frames]
+    scales = np.asarray(scales, float).copy()
+    poses = [np.clip(np.asarray(x, float), LOWER_LIMITS, UPPER_LIMITS) for x in poses]
+    n_shape, n_pose = len(scales), len(LOWER_LIMITS)
+    free = np.arange(n_pose)
+    lo = np.concatenate([np.full(n_shape, bounds[0]), np.tile(LOWER_LIMITS, len(poses))])
+    hi = np.concatenate([np.full(n_shape, bounds[1]), np.tile(UPPER_LIMITS, len(poses))])
+
+    def split(z: np.ndarray) -> tuple[BodyModel, list[np.ndarray]]:
+        """The model of z's shape scales and z's poses."""
+        return (BodyModel(scaled_shape(base, z[:n_shape])),
+                [z[n_shape + k * n_pose:n_shape + (k + 1) * n_pose] for k in range(len(poses))])
+
+    model = BodyModel(scaled_shape(base, scales))
+    best = energy(model, poses)
+    lam, h = 1e-2, 1e-3
+    size = n_shape + n_pose * len(poses)
+    for _ in range(cfg.iterations):
+        bumped = [BodyModel(scaled_shape(base, scales + h * np.eye(n_shape)[i]))
+                  for i in range(n_shape)]  # fmt: skip
+        a, b = np.zeros((size, size)), np.zeros(size)
+        for k, (frame, x) in enumerate(zip(outlines, poses, strict=True)):
+            verts = model.posed_vertices(Pose(x))
+            extra = np.stack([(m.posed_vertices(Pose(x)) - verts) / h for m in bumped], -1)
+            ak, bk = frame.system(model, x, free, renderer, cfg, extra)
+            rows = np.r_[np.arange(n_shape), n_shape + k * n_pose + free]
+            a[np.ix_(rows, rows)] += ak
+            b[rows] += bk
+        accepted, best, lam, _ = _accepted_step(a, b, np.concatenate([scales, *poses]),
+                                                (lo, hi), lam, best,
+                                                lambda z: energy(*split(z)))  # fmt: skip
+        if accepted is None:
+            break
+        model, poses = split(accepted)
+        scales = accepted[:n_shape]
+    return scales, poses, best

@@ -1,0 +1,154 @@
+"""The silhouette energy of thesis section 6.2.3: XOR pixels between model and image, per view.
+
+"The error metric ... computes a pixel-wise exclusive-or operation between the image
+silhouette and the rendered model silhouette in each input camera view. ... The energy
+function value is the sum of the non-zero pixels for every camera view after this pixel-wise
+boolean operation." Section 6.2.5 adds that the fit "can be applied to lower resolution
+versions of the video frames by means of an image pyramid", hence the levels here:
+
+* level 0 is the full resolution; level l halves the size l times (``Camera.scaled``, exact
+  pixel-edge scaling of K, so model and image stay aligned at every level);
+* the image masks of level l are area-averaged from the full-resolution masks
+  (``cv2.INTER_AREA``) and kept where the average is >= 0.5, so a coarse pixel is foreground
+  when at least half of it was, and a limb half a coarse pixel wide does not vanish;
+* the model is rendered directly at each level's camera (pixel-centre rule of
+  :mod:`tracking.track.render`);
+* the XOR count of level l is multiplied by the area ratio of the level (4**l when the image
+  size divides by 2**l), i.e. expressed in full-resolution pixels, so levels are comparable;
+* pixels of a view whose label is unknown (``known`` False: the background behind them could
+  not be estimated, `tracking.silhouettes.step`) count in no XOR, at any level (a coarse pixel
+  is known when at least half of it is).
+
+At level 0 the energy of the pose that produced the masks (with the same renderer) is exactly
+0; at coarser levels a residual of a fraction of a coarse pixel per unit of outline remains,
+because averaging then thresholding is not the same sampling as rendering at the coarse pixel
+centre.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Sequence
+from typing import Any
+
+import cv2
+import numpy as np
+
+from tracking.body.model import BodyModel, Pose
+from tracking.rig.cameras import Camera
+
+
+def iou(a: np.ndarray, b: np.ndarray) -> float:
+    """Intersection over union of two boolean masks of the same shape (1.0 when both empty)."""
+    a, b = np.asarray(a, dtype=bool), np.asarray(b, dtype=bool)
+    if a.shape != b.shape:
+        raise ValueError(f"masks differ in shape: {a.shape} and {b.shape}")
+    union = np.count_nonzero(a | b)
+    return 1.0 if union == 0 else np.count_nonzero(a & b) / union
+
+
+def downsample_mask(mask: np.ndarray, width: int, height: int) -> np.ndarray:
+    """(height, width) bool: the area average of ``mask`` over each coarse pixel, >= 0.5."""
+    coverage = cv2.resize(np.asarray(mask, dtype=np.float32), (width, height),
+                          interpolation=cv2.INTER_AREA)
+    return coverage >= 0.5
+
+
+def counted(xor: np.ndarray, known: np.ndarray | None) -> np.ndarray:
+    """`xor` where the pixels count: all of it when `known` is None."""
+    return xor if known is None else xor & known
+
+
+def known_iou(a: np.ndarray, b: np.ndarray, known: np.ndarray | None) -> float:
+    """`iou` of two masks over the pixels where `known` (all when None)."""
+    return iou(a, b) if known is None else iou(a & known, b & known)
+
+
+class SilhouetteEnergy:
+    """XOR energy of a body pose against foreground masks seen by calibrated cameras.
+
+    masks[i] is the (H, W) bool foreground of cameras[i] (same size); known[i], when given and
+    not None, the (H, W) bool pixels of that view that count (module docstring). ``renderer`` is a
+    :class:`plugins.protocols.SilhouetteRenderer` instance or the name of one
+    (``"cpu-raster"``, ...). ``evaluations`` counts calls of the energy itself.
+    """
+
+    def __init__(self, model: BodyModel, cameras: Sequence[Camera],
+                 masks: Sequence[np.ndarray], renderer: Any, levels: int = 3,
+                 known: Sequence[np.ndarray | None] | None = None) -> None:  # fmt: skip
+        if len(cameras) != len(masks) or not cameras:
+            raise ValueError(f"need one mask per camera, got {len(cameras)} cameras and "
+                             f"{len(masks)} masks")
+        if levels < 1:
+            raise ValueError(f"levels must be >= 1, got {levels}")
+        if isinstance(renderer, str):
+            from plugins.registry import create
+
+            renderer = create("renderer", renderer)
+        self.model = model
+        self.renderer = renderer
+        self.levels = levels
+        self.evaluations = 0
+        self.cameras: list[list[Camera]] = []
+        """cameras[level][view]."""
+        self.masks: list[list[np.ndarray]] = []
+        """masks[level][view]: (h, w) bool image silhouettes of that level."""
+        self.known: list[list[np.ndarray | None]] = []
+        """known[level][view]: (h, w) bool pixels that count, or None for all of them."""
+        known = list(known) if known is not None else [None] * len(cameras)
+        self._pixel_area: list[np.ndarray] = []  # full-resolution pixels per pixel, per view
+        full = []
+        for camera, mask in zip(cameras, masks, strict=True):
+            mask = np.asarray(mask, dtype=bool)
+            if mask.shape != (camera.height, camera.width):
+                raise ValueError(f"mask of camera {camera.name} is {mask.shape}, expected "
+                                 f"{(camera.height, camera.width)}")
+            full.append(mask)
+        for level in range(levels):
+            level_cameras = [c.scaled(0.5**level) for c in cameras]
+            if min(min(c.width, c.height) for c in level_cameras) < 8:
+                raise ValueError(f"level {level} would shrink an image below 8 px; use fewer "
+                                 f"levels")
+            self.cameras.append(level_cameras)
+            self.masks.append([m if level == 0 else downsample_mask(m, c.width, c.height)
+                               for m, c in zip(full, level_cameras, strict=True)])
+            self.known.append([None if k is None else np.asarray(k, bool) if level == 0
+                               else downsample_mask(k, c.width, c.height)
+                               for k, c in zip(known, level_cameras, strict=True)])
+            self._pixel_area.append(np.array([
+                (c0.width * c0.height) / (c.width * c.height)
+                for c0, c in zip(cameras, level_cameras, strict=True)]))
+
+    def with_model(self, model: BodyModel) -> SilhouetteEnergy:
+        """The same cameras and mask pyramid (shared, not rebuilt) for another body model."""
+        other = copy.copy(self)
+        other.model, other.evaluations = model, 0
+        return other
+
+    def _check_level(self, level: int) -> None:
+        if not 0 <= level < self.levels:
+            raise ValueError(f"level must be in 0..{self.levels - 1}, got {level}")
+
+    def model_masks(self, pose: Pose, level: int = 0) -> list[np.ndarray]:
+        """The model's (h, w) bool silhouette in every view at ``level``."""
+        self._check_level(level)
+        from tracking.track.render import render_views
+
+        vertices = self.model.posed_vertices(pose)
+        return render_views(self.renderer, vertices, self.model.faces, self.cameras[level])
+
+    def xor_masks(self, pose: Pose, level: int = 0) -> list[np.ndarray]:
+        """Per view, the (h, w) bool XOR of model and image silhouettes over the known pixels."""
+        return [counted(m ^ image, known) for m, image, known in
+                zip(self.model_masks(pose, level), self.masks[level], self.known[level],
+                    strict=True)]  # fmt: skip
+
+    def per_view(self, pose: Pose, level: int = 0) -> np.ndarray:
+        """(views,) XOR pixel counts at ``level``, in full-resolution pixels."""
+        counts = np.array([np.count_nonzero(x) for x in self.xor_masks(pose, level)], float)
+        return counts * self._pixel_area[level]
+
+    def __call__(self, pose: Pose, level: int = 0) -> float:
+        """Sum over views of the XOR pixel count at ``level``, in full-resolution pixels."""
+        self.evaluations += 1
+        return float(self.per_view(pose, level).sum())

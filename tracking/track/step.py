@@ -1,0 +1,274 @@
+"""`mocap track WS`: the silhouette tracker over a video workspace's sequence.
+
+Reads ``WS/cameras.json`` and ``WS/silhouettes/<camera>/<frame:06d>.png`` (from `mocap synth`
+or `mocap silhouettes`) and writes, each atomically:
+
+* ``tracks/joints.csv``: ``frame,joint,x,y,z``, metres, world frame, the joint names of
+  `tracking.body.model.NODE_NAMES` (those of ``gt/joints.csv``); lost frames have no rows;
+* ``tracks/pose.json``: ``{"frame_rate", "shape": {BodyShape}, "world_from_upright": (3, 3),
+  "frames": [{"frame", "params" (24, POSE_LAYOUT order) or null when lost, "energy_px",
+  "xor_fraction", "event"}]}``;
+* ``tracks/motion.bvh``: the tracked frames on the body skeleton (`tracking.body.motion`); a
+  BVH has no gaps, so a lost frame repeats the last tracked pose (pose.json says which);
+* ``logs/track.rrd``: silhouettes and the XOR overlay per camera, the body mesh and skeleton,
+  and the energy per frame, on the ``frame`` and ``time`` timelines.
+
+The poses, the BVH and the recording are in the *upright frame* of the camera rig
+(`tracking.rig.cameras.upright_frame`): Y up, as the body model, BVH and OpenSim expect, and the
+world rotated about its origin by ``world_from_upright``. An upright body then has a root
+pitch near 0, far from the gimbal lock of the root's ZXY angles, which a Z-up world
+(Qualisys, Pose2Sim) would put at its 90 degree pitch. ``joints.csv`` is in the world frame.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from recon.errors import UserError
+from recon.progress import bar as progress_bar
+from recon.workspace import Timer, Workspace, atomic_output, fingerprint, write_json_atomic
+from tracking.body.model import BONES, NODE_NAMES, BodyModel, BodyShape, Pose, pose_in_frame
+from tracking.body.model import node_positions_in_world as _nodes
+from tracking.body.motion import read_pose_file
+from tracking.silhouettes.step import UNKNOWN_NAME
+from tracking.track.render import render_views
+from tracking.track.tracker import FrameResult, SilhouetteTracker, TrackConfig, TrackingLost
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackStepConfig:
+    init_pose: Path | None = field(
+        default=None,
+        metadata={"help": "initial pose and shape (JSON in the tracks/pose.json layout; its "
+                  "first frame is used) instead of the automatic initialisation",
+                  "metavar": "FILE"},
+    )  # fmt: skip
+    first: int = field(default=0, metadata={"help": "first frame to track"})
+    last: int | None = field(default=None, metadata={"help": "last frame to track (inclusive)"})
+
+
+def frame_rate_of(ws: Workspace) -> float:
+    """The sequence's frame rate as recorded by `mocap synth` or `mocap init-video`."""
+    steps = ws.read_run().get("steps", {})
+    for step, key in (("synth", "frame_rate"), ("init-video", "fps")):
+        value = steps.get(step, {}).get("summary", {}).get(key)
+        if value:
+            return float(value)
+    return 30.0
+
+
+def silhouette_frames(ws: Workspace, names: list[str]) -> list[int]:
+    """Frame indices that every camera has a silhouette for; a one-line error otherwise."""
+    per_camera = {}
+    for name in names:
+        folder = ws.silhouettes_dir / name
+        if not folder.is_dir():
+            raise UserError(f"{ws.root}: no silhouettes for camera {name}; run "
+                            f"`mocap silhouettes {ws.root}` first")  # fmt: skip
+        per_camera[name] = {int(p.stem) for p in folder.glob("*.png") if p.stem.isdigit()}
+    counts = {name: len(frames) for name, frames in per_camera.items()}
+    if len(set(map(frozenset, per_camera.values()))) > 1:
+        raise UserError(f"{ws.root}: cameras have different silhouette frames ({counts})")
+    frames = sorted(next(iter(per_camera.values())))
+    if not frames:
+        raise UserError(f"{ws.root}: no silhouette frames")
+    return frames
+
+
+def unknown_pixels(ws: Workspace, cameras: Sequence[Any]) -> list[np.ndarray | None]:
+    """Per camera, its pixels of unknown background (``silhouettes/<camera>/unknown.png``,
+    `tracking.silhouettes.step`), or None when it has none."""
+    out: list[np.ndarray | None] = []
+    for camera in cameras:
+        path = ws.silhouettes_dir / camera.name / UNKNOWN_NAME
+        out.append(_read_mask(path, camera) if path.exists() else None)
+    return out
+
+
+def _read_mask(path: Path, camera: Any) -> np.ndarray:
+    mask = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    if mask is None:
+        raise UserError(f"{path}: not a readable image")
+    if mask.shape != (camera.height, camera.width):
+        raise UserError(f"{path}: {mask.shape[1]}x{mask.shape[0]} does not match camera "
+                        f"{camera.name} ({camera.width}x{camera.height})")  # fmt: skip
+    return mask > 127
+
+
+def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *,
+                    overwrite: bool = False, progress: bool = True) -> dict[str, Any]:  # fmt: skip
+    """Track the sequence of `ws`; returns the step summary."""
+    from tracking.rig.cameras import read_cameras
+
+    try:
+        cameras = read_cameras(ws.cameras_path)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    frames = [f for f in silhouette_frames(ws, [c.name for c in cameras])
+              if f >= step.first and (step.last is None or f <= step.last)]  # fmt: skip
+    if not frames:
+        raise UserError(f"no silhouette frames between {step.first} and {step.last}")
+    init_shape, init_pose = None, None
+    given = read_pose_file(step.init_pose) if step.init_pose is not None else None
+    if given is not None:
+        init_shape = given.shape
+        init_pose = next((Pose(p) for _, p in given.frames if p is not None), None)
+        if init_pose is None:
+            raise UserError(f"{step.init_pose}: has no pose")
+    upstream = [ws.step(n).fingerprint for n in ("synth", "silhouettes") if ws.step(n)]
+    settings = {"step": dataclasses.asdict(step), "track": dataclasses.asdict(config),
+                "frames": [frames[0], frames[-1], len(frames)]}  # fmt: skip
+    fp = fingerprint("track", settings, upstream)
+    outputs = {"joints": ws.tracks_dir / "joints.csv", "pose": ws.tracks_dir / "pose.json",
+               "bvh": ws.tracks_dir / "motion.bvh", "rrd": ws.logs_dir / "track.rrd"}
+    if done := ws.reusable("track", fp, *outputs.values(), overwrite=overwrite):
+        return {**done.summary, "up_to_date": True}
+    frame_rate = frame_rate_of(ws)
+
+    def masks_of(frame: int) -> list[np.ndarray]:
+        return [_read_mask(ws.silhouettes_dir / c.name / f"{frame:06d}.png", c) for c in cameras]
+
+    world_from_upright = _upright_frame(cameras, masks_of(frames[0]))
+    if given is not None:
+        assert init_pose is not None  # a file without a pose was refused above
+        init_pose = pose_in_frame(init_pose, world_from_upright.T @ given.world_from_upright)
+    upright = [c.in_frame(world_from_upright) for c in cameras]
+    tracker = SilhouetteTracker(upright, config, shape=init_shape,
+                                unknown=unknown_pixels(ws, cameras))
+    results: list[FrameResult] = []
+
+    with Timer() as timer, _Recorder(ws, upright, frame_rate) as recorder:
+        if init_shape is None and config.shape_frames > 1:
+            shape_frames = frames[:config.shape_frames]
+            bar = progress_bar(len(shape_frames), "shape", "frame", enabled=progress)
+            try:
+                init_pose = tracker.calibrate_shape(
+                    [masks_of(f) for f in shape_frames], progress=bar.update)
+            except TrackingLost as exc:
+                raise UserError(f"cannot start tracking at frame {frames[0]}: {exc}") from None
+            bar.close()
+        bar = progress_bar(len(frames), "track", "frame", enabled=progress)
+        for index, frame in enumerate(frames):
+            masks = masks_of(frame)
+            result = tracker.track(frame, masks, init=init_pose if index == 0 else None)
+            results.append(result)
+            recorder.frame(tracker, result, masks)
+            bar.set_postfix_str(f"XOR {result.xor_fraction:.0%} {result.event}"[:40])
+            bar.update()
+        bar.close()
+    if tracker.shape is None or all(r.pose is None for r in results):
+        raise UserError("the subject was lost in every frame; see logs/track.rrd")
+    _write_outputs(outputs, results, tracker.shape, frame_rate, world_from_upright)
+    tracked = [r for r in results if r.pose is not None]
+    summary = {
+        "frames": len(results), "tracked": len(tracked),
+        "lost": [r.frame for r in results if r.pose is None],
+        "events": {str(r.frame): r.event for r in results if r.event},
+        "median_xor_fraction": float(np.median([r.xor_fraction for r in tracked])),
+        "seconds_per_frame": timer.seconds / len(results),
+        "evaluations_per_frame": float(np.mean([r.evaluations for r in results])),
+        "height_m": tracker.shape.height, "frame_rate": frame_rate,
+    }
+    ws.record_step("track", fp, config=settings, seconds=timer.seconds, summary=summary)
+    return summary
+
+
+def _upright_frame(cameras: Sequence[Any], masks: Sequence[np.ndarray]) -> np.ndarray:
+    """`upright_frame` of the rig around the subject of the first frame's silhouettes (the
+    identity when fewer than two views see it)."""
+    from tracking.rig.cameras import upright_frame
+    from tracking.silhouettes.hull import rays_meeting_point
+
+    try:
+        subject = rays_meeting_point(cameras, masks)
+    except ValueError:
+        return np.eye(3)
+    return upright_frame(cameras, subject)
+
+
+def _write_outputs(outputs: dict[str, Path], results: list[FrameResult], shape: BodyShape,
+                   frame_rate: float, world_from_upright: np.ndarray) -> None:  # fmt: skip
+    from tracking.body.bvh import write_bvh
+    from tracking.body.motion import motion_from_poses
+
+    outputs["joints"].parent.mkdir(parents=True, exist_ok=True)
+    text = io.StringIO()
+    writer = csv.writer(text, lineterminator="\n")
+    writer.writerow(["frame", "joint", "x", "y", "z"])
+    for r in results:
+        if r.pose is None:
+            continue
+        for name, xyz in _nodes(r.pose, shape).items():
+            writer.writerow([r.frame, name, *(f"{v:.6f}" for v in world_from_upright @ xyz)])
+    with atomic_output(outputs["joints"]) as partial:
+        partial.write_text(text.getvalue())
+    write_json_atomic(outputs["pose"], {
+        "frame_rate": frame_rate,
+        "shape": dataclasses.asdict(shape),
+        "world_from_upright": world_from_upright.tolist(),
+        "frames": [{"frame": r.frame,
+                    "params": None if r.pose is None else [float(v) for v in r.pose.params],
+                    "energy_px": None if not np.isfinite(r.energy) else r.energy,
+                    "xor_fraction": None if not np.isfinite(r.energy) else r.xor_fraction,
+                    "event": r.event} for r in results],
+    })  # fmt: skip
+    held: list[Pose] = []
+    last = next(r.pose for r in results if r.pose is not None)
+    for r in results:
+        last = r.pose if r.pose is not None else last
+        held.append(last)
+    with atomic_output(outputs["bvh"]) as partial:
+        write_bvh(motion_from_poses(held, shape, 1.0 / frame_rate), partial)
+
+
+class _Recorder:
+    """logs/track.rrd, written as the frames are tracked."""
+
+    def __init__(self, ws: Workspace, cameras: list[Any], frame_rate: float) -> None:
+        self.ws, self.cameras, self.frame_rate = ws, cameras, frame_rate
+
+    def __enter__(self) -> _Recorder:
+        from recon import recording
+
+        self.recording = recording
+        self._context = recording.step_recording(self.ws.log_path("track"), "track")
+        self.rec = self._context.__enter__()
+        recording.log_y_up_world(self.rec)
+        recording.log_skeleton_context(self.rec, "world/body/skeleton", NODE_NAMES, BONES)
+        for cam in self.cameras:
+            recording.log_camera_image(self.rec, image_name=cam.name, image_path=None, K=cam.K,
+                                       width=cam.width, height=cam.height,
+                                       cam_from_world=cam.cam_from_world)  # fmt: skip
+        self.model: BodyModel | None = None
+        return self
+
+    def frame(self, tracker: SilhouetteTracker, result: FrameResult, masks: list) -> None:
+        r, t = self.recording, result.frame / self.frame_rate
+        if result.pose is None or tracker.model is None:
+            if np.isfinite(result.energy):
+                r.log_frame_scalar(self.rec, "track/xor_fraction", result.xor_fraction,
+                                   result.frame, t)  # fmt: skip
+            return
+        vertices = tracker.model.posed_vertices(result.pose)
+        model_masks = render_views(tracker.renderer, vertices, tracker.model.faces, self.cameras)
+        for cam, image, model in zip(self.cameras, masks, model_masks, strict=True):
+            base = f"world/cameras/{r.entity_name(cam.name)}/image"
+            r.log_xor_overlay(self.rec, f"{base}/xor", model, image, result.frame, t)
+        r.log_mesh_frame(self.rec, "world/body/mesh", vertices, tracker.model.faces,
+                         result.frame, t)  # fmt: skip
+        joints = np.array([p for p in _nodes(result.pose, tracker.shape).values()])
+        r.log_skeleton_frame(self.rec, "world/body/skeleton", joints, result.frame, t)
+        r.log_frame_scalar(self.rec, "track/xor_fraction", result.xor_fraction, result.frame, t)
+        r.log_frame_scalar(self.rec, "track/energy_px", result.energy, result.frame, t)
+
+    def __exit__(self, *exc: Any) -> None:
+        self._context.__exit__(*exc)

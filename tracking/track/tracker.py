@@ -1,0 +1,748 @@
+"""Multi-view silhouette tracking, thesis section 6.2.5: per frame, the pose whose rendered
+silhouettes best overlap the image silhouettes (the XOR energy of `tracking.track.energy`).
+
+Per frame, starting from a constant-velocity prediction of the previous two frames:
+
+0. all 24 parameters together against the silhouette outlines (`tracking.track.contour`, damped
+   Gauss-Newton, a step kept only when the XOR energy drops);
+1. root: the 6 global parameters by downhill simplex (Nelder-Mead), coarse pyramid level first;
+2. "head and hip": the spine and neck bends, by simplex;
+3. each limb's 4 parameters (ball joint + hinge): a regular grid over the two swing angles and
+   the hinge, around the prediction, over a range adapted to the parameter changes of the two
+   preceding frames; only valid samples are scored (thesis: the elbow and wrist, or knee and
+   ankle, project inside the silhouette in every view and lie at least a minimum distance from
+   the torso axis); the best sample is refined by simplex;
+4. a final simplex over the root at the finest level. (The thesis' last step, hands and feet,
+   has no parameters in our 24-parameter model: wrists and ankles are rigid end sites.)
+5. step 0 again; the better of steps 0 and 5 by XOR is the frame's pose.
+
+Steps 1-4 alone drift along directions the silhouettes hardly tell apart (pelvis pitch against
+hip flexion and spine bend), and their coarse levels can leave a fine optimum: steps 0 and 5
+remove both. A stage only moves part of the body, so the silhouette of the rest is rendered
+once per stage and each energy evaluation renders only the moving triangles (`_StageEnergy`).
+
+Initialisation (frame 0, and after a lost frame): automatic from the silhouettes. The visual
+hull is carved on a voxel grid around the point where the views' silhouette centroids meet and
+its surface fitted by `tracking.fit.body_fit.fit_body` (scale and pose); the height is capped near
+the
+hull's extent along up, since a hull of few views is fatter than the body and the fit grows to
+fill it. A hull cannot tell left from right limbs: the fit and its left/right swaps of legs and
+arms (`swap_sides`) are each refined against the outlines. The best of them competes with
+upright stances at `init_headings` headings (`upright_starts`), since the fit can fold a limb
+into the trunk or lean the trunk to explain a limb: each is refined by the whole hierarchy with
+the limbs' grids over their whole range, and the lowest XOR wins. When the shape is unknown,
+the segment lengths then come from the outlines, and `calibrate_shape` refines them over
+several frames of a first pass. The rotation angles of the root lock at a 90 degree pitch, so
+an upright body should be tracked in a Y-up frame (`tracking.rig.cameras.upright_frame`; `mocap
+track` does). A pose given by the user
+replaces this ("model alignment", thesis 6.2.4).
+
+A frame whose energy stays above `max_xor_fraction` of the silhouette area (or 1.5 times the
+lowest XOR of an initialisation, when real silhouettes with holes and ghosts set a higher
+floor) is a divergence: it is logged, the tracker re-initialises from the visual hull, and if
+that fails too the frame is reported lost (no joints; never NaN).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import minimize
+
+from tracking.body.bvh import rotations_to_channels
+from tracking.body.model import (
+    LOWER_LIMITS,
+    N_POSE_PARAMS,
+    NODE_INDEX,
+    PARAM_INDEX,
+    PARAM_MOVES_NODE,
+    SHAPE_GROUPS,
+    UPPER_LIMITS,
+    BodyModel,
+    BodyShape,
+    Pose,
+    forward_kinematics,
+    root_rotation,
+    scaled_shape,
+)
+from tracking.rig.cameras import Camera, rig_up
+from tracking.silhouettes.hull import check_voxel_grid, surface_voxels, visual_hull
+from tracking.track.contour import ContourConfig, ContourRefiner, refine_shape
+from tracking.track.energy import SilhouetteEnergy, counted
+from tracking.track.render import render_views
+
+_ROOT = [PARAM_INDEX[n] for n in ("root_tx", "root_ty", "root_tz", "root_rz", "root_rx",
+                                  "root_ry")]  # fmt: skip
+_TRUNK = [PARAM_INDEX["spine_flex"], PARAM_INDEX["neck_flex"]]
+# Limb: (ball-joint parameters rz, rx, ry, hinge), its two end nodes and the torso clearance
+# as a fraction of the shape's chest half width (arms) or hip half width (legs).
+_LIMBS: dict[str, tuple[list[int], tuple[str, str], str]] = {
+    f"{side}_{limb}": (
+        [PARAM_INDEX[f"{side}_{ball}_{a}"] for a in ("rz", "rx", "ry")]
+        + [PARAM_INDEX[f"{side}_{hinge}_flex"]],
+        (f"{side}_{hinge}", f"{side}_{end}"),
+        limb,
+    )
+    for side in ("l", "r")
+    for limb, ball, hinge, end in (("arm", "shoulder", "elbow", "wrist"),
+                                   ("leg", "hip", "knee", "ankle"))
+}  # fmt: skip
+_MOVES = PARAM_MOVES_NODE
+_TWISTS = [PARAM_INDEX[f"{side}_{joint}_ry"] for side in ("l", "r")
+           for joint in ("shoulder", "hip")]  # fmt: skip
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackConfig:
+    levels: int = field(default=3, metadata={"help": "image pyramid levels (1 = full size)"})
+    search_level: int = field(
+        default=1, metadata={"help": "pyramid level of the grid searches (0 = full size)"}
+    )
+    prior_weight: float = field(
+        default=0.0,
+        metadata={"help": "temporal prior: cost of one prior scale of deviation from the "
+                  "predicted pose, as a fraction of the silhouette area (0 = pure XOR)"},
+    )  # fmt: skip
+    prior_scale_deg: float = field(default=10.0, metadata={"help": "prior scale of angles"})
+    prior_scale_m: float = field(default=0.05, metadata={"help": "prior scale of positions"})
+    twist_weight: float = field(
+        default=0.01,
+        metadata={"help": "cost of one twist scale of limb twist (shoulders, hips), as a "
+                  "fraction of the silhouette area (0 = none)"},
+    )  # fmt: skip
+    twist_scale_deg: float = field(default=30.0, metadata={"help": "twist prior scale"})
+    passes: int = field(
+        default=1, metadata={"help": "passes of the whole hierarchy per frame"}
+    )
+    final_level: int = field(
+        default=0, metadata={"help": "pyramid level of the last root refinement of a frame"}
+    )
+    grid: int = field(
+        default=3, metadata={"help": "grid samples per limb parameter (swing, lift, hinge)"}
+    )
+    init_grid: int = field(
+        default=6,
+        metadata={"help": "grid samples per limb angle over its whole range at initialisation"},
+    )
+    min_range_deg: float = field(
+        default=8.0, metadata={"help": "smallest half-range of a limb grid, degrees"}
+    )
+    max_range_deg: float = field(
+        default=40.0, metadata={"help": "largest half-range of a limb grid, degrees"}
+    )
+    range_gain: float = field(
+        default=2.0,
+        metadata={"help": "grid half-range = gain x the parameter's change over the two "
+                  "preceding frames (thesis 6.2.5), clipped to the min/max range"},
+    )  # fmt: skip
+    simplex_evals: int = field(
+        default=15, metadata={"help": "evaluations of each downhill-simplex refinement"}
+    )
+    max_xor_fraction: float = field(
+        default=0.35,
+        metadata={"help": "a frame whose XOR area exceeds this fraction of the silhouette "
+                  "area is a divergence: re-initialise"},
+    )  # fmt: skip
+    init_shape: bool = field(
+        default=True,
+        metadata={"help": "estimate the segment lengths at initialisation when the shape is "
+                  "unknown (off: the standard proportions of the visual hull's height)"},
+    )  # fmt: skip
+    shape_frames: int = field(
+        default=24,
+        metadata={"help": "frames of the shape pass before tracking when the shape is "
+                  "unknown: they are tracked, then the segment lengths are refined over every "
+                  "--shape-stride-th of them at once (<= 1: the first frame's shape only)"},
+    )  # fmt: skip
+    shape_stride: int = field(
+        default=4, metadata={"help": "frame stride of the shape pass's joint refinement"}
+    )
+    init_headings: int = field(
+        default=8,
+        metadata={"help": "upright starting poses, at this many headings, that compete with "
+                  "the visual-hull fit at initialisation (0 = the fit alone)"},
+    )  # fmt: skip
+    init_simplex_evals: int = field(
+        default=120, metadata={"help": "evaluations of each simplex at initialisation"}
+    )
+    voxel_m: float = field(default=0.03, metadata={"help": "visual-hull voxel size, metres"})
+    hull_size_m: float = field(
+        default=2.6, metadata={"help": "side of the visual-hull cube around the subject, metres"}
+    )
+    contour_iterations: int = field(
+        default=8,
+        metadata={"help": "iterations of the joint refinement of all parameters against the "
+                  "silhouette outlines before and after the hierarchy (tracking.track.contour; "
+                  "0 = off)"},
+    )  # fmt: skip
+    contour_level: int = field(
+        default=0, metadata={"help": "pyramid level of the outline refinement (0 = full size)"}
+    )
+    renderer: str = field(
+        default="cpu-raster", metadata={"help": "silhouette renderer plugin (mocap plugins)"}
+    )
+
+    def __post_init__(self) -> None:
+        from recon.errors import UserError
+
+        def flag(name: str) -> str:
+            return "--" + name.replace("_", "-")
+
+        if self.levels < 1:
+            raise UserError(f"--levels must be >= 1, got {self.levels}")
+        for name in ("search_level", "final_level", "contour_level"):
+            if not 0 <= getattr(self, name) < self.levels:
+                raise UserError(f"{flag(name)} must be in 0..{self.levels - 1} (--levels "
+                                f"{self.levels}), got {getattr(self, name)}")
+        for name, low in (("grid", 1), ("init_grid", 1), ("simplex_evals", 1),
+                          ("init_simplex_evals", 1), ("passes", 1), ("shape_stride", 1),
+                          ("shape_frames", 0), ("contour_iterations", 0),
+                          ("init_headings", 0)):  # fmt: skip
+            if getattr(self, name) < low:
+                raise UserError(f"{flag(name)} must be >= {low}, got {getattr(self, name)}")
+        for name in ("prior_weight", "twist_weight", "range_gain"):
+            if getattr(self, name) < 0:
+                raise UserError(f"{flag(name)} must be >= 0, got {getattr(self, name)}")
+        for name in ("prior_scale_deg", "prior_scale_m", "twist_scale_deg", "max_xor_fraction",
+                     "voxel_m"):  # fmt: skip
+            if not getattr(self, name) > 0:
+                raise UserError(f"{flag(name)} must be > 0, got {getattr(self, name)}")
+        if not 0 <= self.min_range_deg <= self.max_range_deg:
+            raise UserError(f"need 0 <= --min-range-deg <= --max-range-deg, got "
+                            f"{self.min_range_deg} and {self.max_range_deg}")
+        check_voxel_grid(self.hull_size_m, self.voxel_m, "--hull-size-m", "--voxel-m")
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """One tracked frame: pose or None when lost; energy in full-resolution XOR pixels."""
+
+    frame: int
+    pose: Pose | None
+    energy: float
+    silhouette_area: float
+    evaluations: int
+    seconds: float
+    event: str = ""  # "init", "reinit", "lost: ..." or ""
+
+    @property
+    def xor_fraction(self) -> float:
+        return self.energy / max(self.silhouette_area, 1.0)
+
+
+class _StageEnergy:
+    """Energy of a pose in which only the parameters `free` change (the rest held at `base`):
+    the silhouette of the triangles they do not move is rendered once. `prior`: (centre,
+    weight) per parameter, adding sum weight (x - centre)^2 XOR pixels (the temporal prior)."""
+
+    def __init__(self, energy: SilhouetteEnergy, base: np.ndarray, free: Sequence[int],
+                 level: int, prior: tuple[np.ndarray, np.ndarray] | None = None,
+                 ) -> None:  # fmt: skip
+        self.energy, self.level = energy, level
+        self.prior = prior
+        self.base = base.copy()
+        self.free = np.asarray(free)
+        model = energy.model
+        moved_nodes = _MOVES[self.free].any(axis=0)
+        moving = moved_nodes[model.node_of_segment[model.segment_of_face]]
+        self.faces = model.faces[moving]
+        self.cameras = energy.cameras[level]
+        self.masks = energy.masks[level]
+        self.known = energy.known[level]
+        static_faces = model.faces[~moving]
+        vertices = model.posed_vertices(Pose(self.base))
+        self.static = (
+            render_views(energy.renderer, vertices, static_faces, self.cameras)
+            if len(static_faces)
+            else [np.zeros((cam.height, cam.width), bool) for cam in self.cameras]
+        )
+        self.pixel_area = energy._pixel_area[level]
+        self.evaluations = 0
+
+    def params(self, values: np.ndarray) -> np.ndarray:
+        x = self.base.copy()
+        x[self.free] = values
+        return np.clip(x, LOWER_LIMITS, UPPER_LIMITS)
+
+    def __call__(self, values: np.ndarray) -> float:
+        self.evaluations += 1
+        vertices = self.energy.model.posed_vertices(Pose(self.params(values)))
+        moving = render_views(self.energy.renderer, vertices, self.faces, self.cameras)
+        total = 0.0
+        if self.prior is not None:
+            centre, weight = self.prior
+            x = self.params(values)
+            total += float(np.sum(weight[self.free] * (x[self.free] - centre[self.free]) ** 2))
+        for static, part, mask, known, area in zip(self.static, moving, self.masks, self.known,
+                                                   self.pixel_area, strict=True):  # fmt: skip
+            total += area * np.count_nonzero(counted((static | part) ^ mask, known))
+        return total
+
+
+def _simplex(fun: Callable[[np.ndarray], float], x0: np.ndarray, steps: np.ndarray,
+             lo: np.ndarray, hi: np.ndarray, evals: int) -> np.ndarray:  # fmt: skip
+    """Downhill simplex (Nelder-Mead) from x0 with initial edge lengths `steps`, in bounds."""
+    x0 = np.clip(x0, lo, hi)
+    simplex = np.vstack([x0, x0 + np.diag(steps)])
+    # Keep the initial simplex inside the bounds by stepping the other way where needed.
+    over = simplex[1:] > hi
+    simplex[1:][over] = (x0[None, :] - np.diag(steps))[over]
+    simplex = np.clip(simplex, lo, hi)
+    result = minimize(fun, x0, method="Nelder-Mead", bounds=list(zip(lo, hi, strict=True)),
+                      options={"initial_simplex": simplex, "maxfev": evals, "xatol": 1e-4,
+                               "fatol": 0.5})  # fmt: skip
+    return result.x
+
+
+class SilhouetteTracker:
+    """Tracks one subject through a sequence of multi-view silhouettes (see module docstring).
+
+    cameras: the calibrated views; shape: the subject's scale parameters (fixed, thesis 6.2.4),
+    or None to estimate them at initialisation; unknown: per view, None or the (H, W) bool
+    pixels whose label the silhouettes cannot tell (no background known behind them): they
+    count in no energy, and do not carve the visual hull.
+    """
+
+    def __init__(self, cameras: Sequence[Camera], config: TrackConfig | None = None,
+                 shape: BodyShape | None = None,
+                 unknown: Sequence[np.ndarray | None] | None = None) -> None:  # fmt: skip
+        from plugins.registry import create
+
+        self.cameras = list(cameras)
+        self.unknown = list(unknown) if unknown is not None else [None] * len(self.cameras)
+        self.known = [None if u is None else ~np.asarray(u, bool) for u in self.unknown]
+        self.config = config or TrackConfig()
+        self.renderer = create("renderer", self.config.renderer)
+        self.shape = shape
+        self.model = BodyModel(shape) if shape is not None else None
+        self.history: list[np.ndarray] = []  # params of the last tracked frames
+        self._xor_floor = np.inf  # XOR fraction of the best initialisation (divergence test)
+        # (the frame's energy, level, its outline refiner): built once per frame and level
+        self._refiner: tuple[SilhouetteEnergy, int, ContourRefiner] | None = None
+        self.evaluations = 0
+        # How `calibrate_shape` found the pose it returns: the first tracked frame starts from
+        # it as from a given pose, and says this instead.
+        self._start_event = ""
+
+    # -- initialisation -------------------------------------------------------------------
+    def visual_hull_points(self, masks: Sequence[np.ndarray]) -> np.ndarray:
+        """(N, 3) centres of the visual hull's surface voxels, world frame."""
+        if not all(m.any() for m in masks):
+            empty = [c.name for c, m in zip(self.cameras, masks, strict=True) if not m.any()]
+            raise TrackingLost(f"empty silhouette in {', '.join(empty)}")
+        points, n, occupied = visual_hull(self.cameras, masks, size_m=self.config.hull_size_m,
+                                          voxel_m=self.config.voxel_m, unknown=self.unknown)
+        return points[surface_voxels(occupied, n)]
+
+    def initialise(self, masks: Sequence[np.ndarray], init: Pose | None = None) -> tuple[Pose, str]:
+        """The first pose: `init` if given, else the best of a body fitted to the visual hull and
+        upright bodies at `init_headings` headings, each refined against the silhouettes. Sets
+        the shape when it was unknown."""
+        from tracking.fit.body_fit import FitConfig, fit_body
+
+        if init is None:
+            points = self.visual_hull_points(masks)
+            if len(points) < 100:
+                raise TrackingLost("the silhouettes do not intersect in a visual hull")
+            up = rig_up(self.cameras, points.mean(axis=0))
+            fit = fit_body(points, FitConfig(min_inlier_fraction=0.0, max_median_residual=1.0),
+                           up=up)
+            estimate_shape = self.shape is None
+            if estimate_shape:
+                # A hull carved by few views is fatter than the body, and the fit grows the
+                # model to fill it (1.86-2.02 m for the ~1.75 m subject of the Pose2Sim demo,
+                # whose hull is 1.74 m tall): a standing subject is hardly taller than the
+                # hull along up. (Capping at the extent itself cost the synthetic walk 5 mm:
+                # the lengths' refinement then settled elsewhere.)
+                height = fit.shape.height
+                if up is not None:
+                    extent = float(np.ptp(points @ up)) + self.config.voxel_m
+                    height = min(height, 1.05 * extent)
+                self.shape = BodyShape.default(height)
+                self.model = BodyModel(self.shape)
+            # The hull fit can put a limb inside the trunk or lean the trunk to explain a
+            # limb: upright bodies at several headings compete with it (each refined by the
+            # whole hierarchy, limb grids over their whole range); the lowest XOR wins.
+            energy = self._energy(masks)
+            pelvis = fit.pose.params[:3].copy()
+            if up is not None:  # standing on the hull's lowest point
+                pelvis += (np.min(points @ up) + self.shape.hip_height - pelvis @ up) * up
+            starts = [self._best_hypothesis(energy, fit.pose.params),
+                      *upright_starts(fit.pose, up, self.config.init_headings, pelvis)]
+            refined = [self._refine_all(energy, p.params.copy(), init=True) for p in starts]
+            scores = [self._objective(energy, x, self.config.final_level) for x in refined]
+            best = int(np.argmin(scores))
+            x = refined[best]
+            if estimate_shape and self.config.init_shape:
+                # People differ in proportions: the segment lengths from the silhouettes'
+                # outlines, with the pose (fixed afterwards: thesis 6.2.4).
+                x = self._refine_shape([masks], [Pose(x)])[0].params
+                x = self._refine_all(self._energy(masks), x, init=True)
+            start = "its fit" if best == 0 else (
+                f"an upright start at {360 * (best - 1) // (len(starts) - 1)} deg from its fit")
+            message = f"init from visual hull ({len(points)} surface voxels; {start})"
+        else:
+            if self.shape is None:
+                raise ValueError("an initial pose needs the subject's shape")
+            message, self._start_event = self._start_event or "init from the given pose", ""
+            x = self._refine_all(self._energy(masks), init.params.copy(), init=True)
+        self.history = []
+        return Pose(x), message
+
+    def _best_hypothesis(self, energy: SilhouetteEnergy, x: np.ndarray) -> Pose:
+        """The visual hull cannot tell which leg (or arm) is which: of the pose and its
+        left/right swaps of the legs, the arms, and both, the one whose outline refinement
+        ends with the lowest XOR energy."""
+        level = self.config.search_level
+        refiner = ContourRefiner(energy.model, energy.cameras[level], energy.masks[level],
+                                 energy.renderer, ContourConfig(iterations=20),
+                                 known=energy.known[level])  # fmt: skip
+        best, best_e = x, np.inf
+        for start in (x, swap_sides(x, "leg"), swap_sides(x, "arm"),
+                      swap_sides(swap_sides(x, "leg"), "arm")):  # fmt: skip
+            y, e, n = refiner.refine(start, np.arange(N_POSE_PARAMS),
+                                     lambda p: energy(Pose(p), level))  # fmt: skip
+            self.evaluations += n
+            if e < best_e:
+                best, best_e = y, e
+        return Pose(best)
+
+    def _refine_shape(self, sequence: Sequence[Sequence[np.ndarray]], poses: Sequence[Pose],
+                      iterations: int = 30) -> list[Pose]:  # fmt: skip
+        """Segment-length scales (`SHAPE_GROUPS`) and the poses of one or more frames
+        together, by Gauss-Newton on the silhouette outlines
+        (`tracking.track.contour.refine_shape`);
+        sets the shape and returns the poses."""
+        assert self.shape is not None
+        level = self.config.contour_level
+        base = self.shape
+        energies = [self._energy(masks) for masks in sequence]
+
+        def energy(model: BodyModel, xs: Sequence[np.ndarray]) -> float:
+            self.evaluations += len(xs)
+            return sum(e.with_model(model)(Pose(x), level)
+                       for e, x in zip(energies, xs, strict=True))  # fmt: skip
+
+        scales, xs, _ = refine_shape(
+            base, np.ones(len(SHAPE_GROUPS)),
+            [(e.cameras[level], e.masks[level], e.known[level]) for e in energies],
+            [p.params for p in poses],
+            self.renderer, energy, ContourConfig(iterations=iterations))
+        self.shape = scaled_shape(base, scales)
+        self.model = BodyModel(self.shape)
+        return [Pose(x) for x in xs]
+
+    def calibrate_shape(self, sequence: Sequence[Sequence[np.ndarray]],
+                        progress: Callable[[], object] | None = None) -> Pose:
+        """The subject's shape from the first frames of a sequence (masks per frame), before
+        tracking it: the first frame is initialised (with its own shape estimate), the others
+        are tracked, and every `shape_stride`-th tracked frame's pose is refined together with
+        the segment lengths, which the silhouettes of several poses tell apart better than one.
+        Returns the first frame's pose with that shape; the tracker then starts afresh from it
+        and its event says how it was found (not "the given pose")."""
+        cfg = self.config
+        if self.shape is not None:
+            raise ValueError("the shape is already known")
+        picked: list[tuple[Sequence[np.ndarray], Pose]] = []
+        for index, masks in enumerate(sequence):
+            result = self.track(index, masks)
+            if index == 0:
+                self._start_event = f"{result.event}; segment lengths from the first frames"
+            if progress is not None:
+                progress()
+            if result.pose is None:
+                if index == 0:
+                    raise TrackingLost(result.event.removeprefix("lost: "))
+                break
+            if index % max(cfg.shape_stride, 1) == 0:
+                picked.append((masks, result.pose))
+        poses = self._refine_shape([m for m, _ in picked], [p for _, p in picked])
+        self.history = []
+        return Pose(self._refine_all(self._energy(picked[0][0]), poses[0].params.copy(),
+                                     init=True))
+
+    def refine(self, masks: Sequence[np.ndarray], pose: Pose, *, passes: int = 2,
+               shape: bool = False) -> Pose:  # fmt: skip
+        """The best pose of one frame this body model reaches from `pose`, with no time in the
+        loop: `passes` runs of the whole hierarchy with every limb's grid over its whole range
+        (what the initialisation gives each start); with `shape`, the segment scales are fitted
+        to this frame alone first (this sets the tracker's shape). A measure of the model
+        rather than of the tracking: how far a tracked pose is from what the model can do."""
+        if self.shape is None:
+            raise ValueError("refine needs the subject's shape")
+        x = pose.params.copy()
+        if shape:
+            x = self._refine_shape([masks], [pose])[0].params
+        energy = self._energy(masks)
+        for _ in range(passes):
+            x = self._refine_all(energy, x, init=True)
+        return Pose(x)
+
+    # -- tracking -------------------------------------------------------------------------
+    def _energy(self, masks: Sequence[np.ndarray]) -> SilhouetteEnergy:
+        assert self.model is not None
+        return SilhouetteEnergy(self.model, self.cameras, masks, self.renderer,
+                                levels=self.config.levels, known=self.known)  # fmt: skip
+
+    def _prediction(self) -> tuple[np.ndarray, np.ndarray]:
+        """Constant-velocity prediction and the per-parameter change of the last two frames."""
+        if len(self.history) >= 2:
+            change = self.history[-1] - self.history[-2]
+            return np.clip(self.history[-1] + change, LOWER_LIMITS, UPPER_LIMITS), np.abs(change)
+        return self.history[-1].copy(), np.zeros(N_POSE_PARAMS)
+
+    def _stage(self, energy: SilhouetteEnergy, x: np.ndarray, free: Sequence[int],
+               steps: np.ndarray, level: int, evals: int | None = None) -> np.ndarray:  # fmt: skip
+        stage = _StageEnergy(energy, x, free, level, self._prior)
+        free = list(free)
+        values = _simplex(stage, x[free], steps, LOWER_LIMITS[free], UPPER_LIMITS[free],
+                          evals or self.config.simplex_evals)  # fmt: skip
+        self.evaluations += stage.evaluations
+        return stage.params(values)
+
+    def _limb(self, energy: SilhouetteEnergy, x: np.ndarray, limb: str, change: np.ndarray,
+              level: int, wide: bool) -> np.ndarray:  # fmt: skip
+        params, ends, kind = _LIMBS[limb]
+        cfg = self.config
+        stage = _StageEnergy(energy, x, params, level, self._prior)
+        half = np.clip(cfg.range_gain * change[params], np.deg2rad(cfg.min_range_deg),
+                       np.deg2rad(cfg.max_range_deg))  # fmt: skip
+        if wide:
+            half[:] = np.deg2rad(cfg.max_range_deg)
+        # Grid over abduction, flexion and the hinge; the axial twist is left to the simplex.
+        grid_axes = [0, 1, 3]
+        if wide:
+            # At initialisation nothing bounds the limb yet: the whole range of each angle.
+            axes = [np.linspace(LOWER_LIMITS[params[a]], UPPER_LIMITS[params[a]], cfg.init_grid)
+                    for a in grid_axes]  # fmt: skip
+            mesh = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+            samples = np.repeat(x[params][None], len(mesh), axis=0)
+            samples[:, grid_axes] = mesh
+        else:
+            offsets = np.linspace(-1, 1, cfg.grid) if cfg.grid > 1 else np.zeros(1)
+            mesh = np.stack(np.meshgrid(*[offsets] * 3, indexing="ij"), -1).reshape(-1, 3)
+            samples = np.repeat(x[params][None], len(mesh), axis=0)
+            samples[:, grid_axes] += mesh * half[grid_axes]
+        samples = np.clip(samples, LOWER_LIMITS[params], UPPER_LIMITS[params])
+        best, best_e = x[params], stage(x[params])
+        for values in samples:
+            if not self._valid(stage.params(values), ends, kind, energy, level):
+                continue
+            e = stage(values)
+            if e < best_e:
+                best, best_e = values, e
+        steps = np.maximum(half / max(cfg.grid - 1, 1), np.deg2rad(3.0))
+        values = _simplex(stage, best, steps, LOWER_LIMITS[params], UPPER_LIMITS[params],
+                          cfg.init_simplex_evals if wide else cfg.simplex_evals)  # fmt: skip
+        self.evaluations += stage.evaluations
+        return stage.params(values)
+
+    def _valid(self, x: np.ndarray, ends: tuple[str, str], kind: str,
+               energy: SilhouetteEnergy, level: int) -> bool:  # fmt: skip
+        """Thesis 6.2.5's sample test: the limb's two end nodes lie inside the (dilated)
+        silhouette in every view and away from the torso axis."""
+        assert self.shape is not None
+        world = forward_kinematics(Pose(x), self.shape)
+        pelvis, neck = world[NODE_INDEX["pelvis"], :3, 3], world[NODE_INDEX["neck"], :3, 3]
+        axis = (neck - pelvis) / max(np.linalg.norm(neck - pelvis), 1e-9)
+        clearance = (0.5 * self.shape.chest_half_width if kind == "arm"
+                     else 0.3 * self.shape.hip_half_width)  # fmt: skip
+        points = np.array([world[NODE_INDEX[n], :3, 3] for n in ends])
+        off_axis = points - pelvis - np.outer((points - pelvis) @ axis, axis)
+        if np.any(np.linalg.norm(off_axis, axis=1) < clearance):
+            return False
+        for cam, mask in zip(energy.cameras[level], self._dilated[level], strict=True):
+            uv, depth = cam.project(points)
+            col, row = np.floor(uv[:, 0]), np.floor(uv[:, 1])
+            if np.any(~np.isfinite(col)) or np.any(depth <= 0):
+                return False
+            col, row = col.astype(int), row.astype(int)
+            inside = (col >= 0) & (col < cam.width) & (row >= 0) & (row < cam.height)
+            if not inside.all() or not mask[row, col].all():
+                return False
+        return True
+
+    def _refine_all(self, energy: SilhouetteEnergy, x: np.ndarray, init: bool = False,
+                    change: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+        """Root, trunk, limbs, root again: the hierarchy of thesis 6.2.5."""
+        import cv2
+
+        cfg = self.config
+        # Where a view cannot tell (unknown pixels), a joint counts as inside its silhouette.
+        def inside(mask: np.ndarray, known: np.ndarray | None) -> np.ndarray:
+            grown = cv2.dilate(mask.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+            return grown if known is None else grown | ~known
+
+        self._dilated = [[inside(m, k) for m, k in zip(masks, known, strict=True)]
+                         for masks, known in zip(energy.masks, energy.known, strict=True)]
+        coarse = min(cfg.levels - 1, cfg.search_level + 1)
+        # Temporal prior (thesis: "prediction"): a deviation of one `prior_scale` from the
+        # predicted pose costs `prior_weight` of the silhouette area, in XOR pixels.
+        area = _known_area(energy.masks[0], energy.known[0])
+        scale = np.where(np.arange(N_POSE_PARAMS) < 3, cfg.prior_scale_m,
+                         np.deg2rad(cfg.prior_scale_deg))  # fmt: skip
+        if init:
+            centre, weight = np.zeros(N_POSE_PARAMS), np.zeros(N_POSE_PARAMS)
+        else:
+            centre, weight = x.copy(), cfg.prior_weight * area / scale**2
+        # A limb's axial twist barely changes its silhouette (limbs are nearly round), so
+        # without a pull it drifts and other joints compensate: pull twists weakly to 0.
+        twist = cfg.twist_weight * area / np.deg2rad(cfg.twist_scale_deg) ** 2
+        total = weight[_TWISTS] + twist
+        # Without the temporal prior and with --twist-weight 0 nothing pulls: no 0/0.
+        centre[_TWISTS] = np.divide(weight[_TWISTS] * centre[_TWISTS], total,
+                                    out=centre[_TWISTS].copy(), where=total > 0)
+        weight[_TWISTS] = weight[_TWISTS] + twist
+        self._prior = (centre, weight)
+        if init or change is None:
+            change = np.zeros(N_POSE_PARAMS)
+            root_steps = np.array([0.05, 0.05, 0.05, 0.08, 0.08, 0.15])
+        else:
+            # The simplex starts as large as the last frame-to-frame change, within limits.
+            root_steps = np.clip(1.5 * change[_ROOT], [0.01] * 3 + [0.02] * 3,
+                                 [0.08] * 3 + [0.15] * 3)  # fmt: skip
+        evals = cfg.init_simplex_evals if init else cfg.simplex_evals
+        start = None
+        if cfg.contour_iterations:
+            # The outlines first: from a close start they reach the optimum on their own; the
+            # hierarchy's grids then look for larger motions, and the better of the two wins
+            # (the coarse levels of the hierarchy can leave a fine optimum).
+            x = self._contour(energy, x, cfg.contour_level)
+            start = x.copy()
+        for level in sorted({coarse, cfg.search_level}, reverse=True):
+            x = self._stage(energy, x, _ROOT, root_steps, level, evals)
+            root_steps = root_steps / 2
+        x = self._stage(energy, x, _TRUNK, np.deg2rad([8.0, 8.0]), cfg.search_level, evals)
+        for limb in _LIMBS:
+            x = self._limb(energy, x, limb, change, cfg.search_level, wide=init)
+        x = self._stage(energy, x, _ROOT, root_steps / 2, cfg.final_level, evals)
+        if start is not None:
+            x = self._contour(energy, x, cfg.contour_level)
+            if self._objective(energy, start, cfg.final_level) < self._objective(
+                    energy, x, cfg.final_level):
+                x = start
+        return x
+
+    def _objective(self, energy: SilhouetteEnergy, x: np.ndarray, level: int) -> float:
+        """The XOR energy at `level` plus the temporal and twist priors."""
+        centre, weight = self._prior
+        return energy(Pose(x), level) + float(np.sum(weight * (x - centre) ** 2))
+
+    def _contour(self, energy: SilhouetteEnergy, x: np.ndarray, level: int) -> np.ndarray:
+        """All parameters at once against the silhouette outlines (`tracking.track.contour`), steps
+        accepted only when the XOR energy plus the temporal prior goes down."""
+        # One refiner per frame and level: its image outlines and distance fields are the
+        # frame's, whichever pose it refines (twice a frame: before and after the hierarchy).
+        if self._refiner is None or self._refiner[0] is not energy or self._refiner[1] != level:
+            self._refiner = (energy, level, ContourRefiner(
+                energy.model, energy.cameras[level], energy.masks[level], energy.renderer,
+                ContourConfig(iterations=self.config.contour_iterations),
+                known=energy.known[level]))
+        refiner = self._refiner[2]
+        x, _, evaluations = refiner.refine(x, np.arange(N_POSE_PARAMS),
+                                           lambda y: self._objective(energy, y, level))
+        self.evaluations += evaluations
+        return x
+
+    def track(self, frame: int, masks: Sequence[np.ndarray], init: Pose | None = None
+              ) -> FrameResult:  # fmt: skip
+        """Track one frame; masks: one (H, W) bool silhouette per camera."""
+        start = time.perf_counter()
+        self.evaluations = 0
+        area = _known_area([np.asarray(m, bool) for m in masks], self.known)
+        empty = [c.name for c, m in zip(self.cameras, masks, strict=True) if not m.any()]
+        if empty:
+            self.history = []
+            return FrameResult(frame, None, float("nan"), area, 0, time.perf_counter() - start,
+                               f"lost: empty silhouette in {', '.join(empty)}")  # fmt: skip
+        event = ""
+        try:
+            if not self.history:
+                pose, event = self.initialise(masks, init)
+                x = pose.params
+                energy = self._energy(masks)  # the model exists (and is fixed) from here on
+            else:
+                energy = self._energy(masks)
+                predicted, change = self._prediction()
+                x = self._refine_all(energy, predicted, change=change)
+                for _ in range(self.config.passes - 1):
+                    # Another pass from the result, with the ranges of a small change.
+                    x = self._refine_all(energy, x, change=np.abs(x - predicted) / 2)
+            e = energy(Pose(x))
+            if event:
+                # What the silhouettes allow: real masks have holes and ghosts, so the first
+                # frame's XOR sets the bar (at least `max_xor_fraction`) for the divergence test.
+                # The lowest such bar so far: a re-initialisation that starts worse must not
+                # raise it, or a drifting track would never count as diverged again.
+                self._xor_floor = min(self._xor_floor, e / area)
+            limit = max(self.config.max_xor_fraction, 1.5 * self._xor_floor) * area
+            if e > limit and event == "":
+                # Divergence: start again from the visual hull.
+                pose, _ = self.initialise(masks)
+                x2 = pose.params
+                e2 = energy(Pose(x2))
+                event = f"reinit (XOR {e / area:.0%} of the silhouette)"
+                if e2 < e:
+                    x, e = x2, e2
+            if e > limit and not event.startswith("init"):
+                self.history = []
+                return FrameResult(frame, None, e, area, self.evaluations,
+                                   time.perf_counter() - start,
+                                   f"lost: XOR {e / area:.0%} of the silhouette area")  # fmt: skip
+        except TrackingLost as exc:
+            self.history = []
+            return FrameResult(frame, None, float("nan"), area, self.evaluations,
+                               time.perf_counter() - start, f"lost: {exc}")  # fmt: skip
+        self.history = [*self.history[-1:], x]
+        return FrameResult(frame, Pose(x), e, area, self.evaluations,
+                           time.perf_counter() - start, event)  # fmt: skip
+
+
+def upright_starts(fit: Pose, up: np.ndarray | None, headings: int,
+                   pelvis: np.ndarray | None = None) -> list[Pose]:  # fmt: skip
+    """Standing poses with their pelvis at `pelvis` (default: `fit`'s), at `headings` headings
+    evenly around `up` (None: `fit`'s own up) from `fit`'s, arms hanging a little away from
+    the body."""
+    rotation = root_rotation(fit)
+    up = rotation[:, 1] if up is None else np.asarray(up, dtype=float)
+    forward = rotation[:, 2] - (rotation[:, 2] @ up) * up
+    if np.linalg.norm(forward) < 1e-6:  # the fit lies along `up`: any heading will do
+        forward = np.linalg.svd(up[None])[2][-1]
+    forward /= np.linalg.norm(forward)
+    starts = []
+    for k in range(headings):
+        a = 2.0 * np.pi * k / headings
+        heading = np.cos(a) * forward + np.sin(a) * np.cross(up, forward)
+        x = np.zeros(N_POSE_PARAMS)
+        x[:3] = fit.params[:3] if pelvis is None else pelvis
+        x[3:6] = np.deg2rad(rotations_to_channels(
+            np.stack([np.cross(up, heading), up, heading], axis=1), "ZXY"))
+        for side, sign in (("l", 1.0), ("r", -1.0)):
+            x[PARAM_INDEX[f"{side}_shoulder_rz"]] = np.deg2rad(10.0) * sign
+            x[PARAM_INDEX[f"{side}_elbow_flex"]] = np.deg2rad(10.0)
+        starts.append(Pose(np.clip(x, LOWER_LIMITS, UPPER_LIMITS)))
+    return starts
+
+
+def _known_area(masks: Sequence[np.ndarray], known: Sequence[np.ndarray | None]) -> float:
+    """Silhouette pixels over all views, counting only the known ones."""
+    return float(sum(np.count_nonzero(counted(m, k)) for m, k in zip(masks, known, strict=True)))
+
+
+def swap_sides(x: np.ndarray, limb: str) -> np.ndarray:
+    """Pose parameters with the left and right legs (limb "leg") or arms ("arm") exchanged:
+    flexion and the hinge carry over, abduction and twist change sign (they mirror)."""
+    x = np.array(x, dtype=float)
+    ball, hinge = ("shoulder", "elbow") if limb == "arm" else ("hip", "knee")
+    for name, sign in ((f"{ball}_rz", -1.0), (f"{ball}_rx", 1.0), (f"{ball}_ry", -1.0),
+                       (f"{hinge}_flex", 1.0)):  # fmt: skip
+        left, right = PARAM_INDEX[f"l_{name}"], PARAM_INDEX[f"r_{name}"]
+        x[left], x[right] = sign * x[right], sign * x[left]
+    return x
+
+
+class TrackingLost(Exception):
+    """The subject cannot be found in this frame."""
