@@ -75,7 +75,7 @@ def main() -> None:
             with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                               host="127.0.0.1", dashboard_address=None) as cluster:
                 report = run_batch(roots, BatchConfig(scheduler=cluster.scheduler_address),
-                                   sfm, dense, mesh)
+                                   {"sfm": sfm, "dense": dense, "mesh": mesh})
             if report.failed:
                 details = [r.failure.detail or "" for r in report.failed if r.failure]
                 raise SystemExit("\n".join([*report.lines(), *details]))
@@ -96,7 +96,7 @@ def main() -> None:
 def _silhouettes_scaling(root: Path, frames: int) -> None:
     from distributed import Client, LocalCluster, get_task_stream
 
-    from recon.batch import BatchConfig, BatchStep, run_batch
+    from recon.batch import BatchConfig, run_batch
     from recon.workspace import Workspace
     from tracking.rig.video import init_video, workspace_cameras
     from tracking.silhouettes.step import SilhouettesConfig, make_silhouettes
@@ -126,8 +126,8 @@ def _silhouettes_scaling(root: Path, frames: int) -> None:
               Client(cluster) as client, get_task_stream(client) as stream):
             report = run_batch([root / f"video-{workers}"],
                                BatchConfig(scheduler=cluster.scheduler_address,
-                                           steps=(BatchStep.SILHOUETTES,)),
-                               silhouettes=config, client=client)
+                                           steps=("silhouettes",)),
+                               {"silhouettes": config}, client=client)
         if report.failed:
             details = [r.failure.detail or "" for r in report.failed if r.failure]
             raise SystemExit("\n".join([*report.lines(), *details]))

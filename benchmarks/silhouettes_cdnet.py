@@ -6,14 +6,16 @@ Scoring is CDnet's: frames of temporalROI.txt (470 to the last frame present, 90
 pixels inside ROI.bmp, ground truth 255 foreground, 0 and 50 (shadow) background, 85 and 170
 not counted; precision, recall and F-measure from the counts summed over all scored frames.
 
-Ours (tracking.silhouettes.subtraction, default SilhouetteConfig): the highway has cars in most of
-its early
-frames, so there is no empty frame for the thesis' mean and standard deviation; the background
-is the temporal median of every second frame before the scored range (1-469), the spread the
-median absolute deviation x 1.4826. A car covers a given pixel in far fewer than half of those
-frames, so the median is the road; a second row shows the plain mean and standard deviation of
-the same frames (cars included) for comparison. The model is fixed: no frame of the scored
-range is used to build it.
+Ours: the background model and the classification of `mocap silhouettes` with its defaults
+(SilhouettesConfig(): tracking.silhouettes.step.background_sample picks the frames and
+background_model builds the model, the temporal median and 1.4826 MAD of 21 frames spread
+evenly, re-estimated once over the frames where each pixel is not foreground; default
+SilhouetteConfig thresholds). The highway has cars in most of its early frames, so there is no
+empty frame for the thesis' mean and standard deviation. The first row builds the model from
+frames 1-469, before the scored range, so no scored frame is used to build it; the second row
+spreads the 21 frames over the whole sequence, as `mocap silhouettes` does with a video (the
+scored frames among them); the third shows the thesis' plain mean and standard deviation of
+the first row's frames (`--background frames:0-468`, cars included) for comparison.
 
 MOG2 and KNN: cv2.createBackgroundSubtractorMOG2() / KNN() with default settings, fed every
 frame from 1 in order (they learn as they go); their shadow value 127 counts as background.
@@ -34,11 +36,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from tracking.silhouettes.step import SilhouettesConfig, background_model, background_sample
 from tracking.silhouettes.subtraction import (
-    BackgroundModel,
     Counts,
     Label,
-    SilhouetteConfig,
     classify,
     confusion_counts,
     foreground_mask,
@@ -48,6 +49,7 @@ ROOT = Path(__file__).resolve().parents[1]
 HIGHWAY = ROOT.parent / "shared" / "data" / "cdnet_highway"
 TARGET_F = 0.90
 PICTURE_FRAMES = (520, 690, 860)
+STEP_ROW = "ours, unscored frames"
 
 
 def _read(path: Path, flags: int = cv2.IMREAD_COLOR) -> np.ndarray:
@@ -72,29 +74,33 @@ def main() -> None:
     truth = {i: _read(args.data / "groundtruth" / f"gt{i:06d}.png", cv2.IMREAD_GRAYSCALE)
              for i in range(first, last + 1)}  # fmt: skip
     roi = _read(args.data / "ROI.bmp", cv2.IMREAD_GRAYSCALE)
-    config = SilhouetteConfig()
+    config = SilhouettesConfig()
+    thresholds = config.thresholds
     print(f"data: {args.data}  frames 1-{last}, scored {first}-{last} "
           f"({last - first + 1} frames, {frames[0].shape[1]}x{frames[0].shape[0]})")
 
-    # Frame i is frames[i - 1]; the model sees only frames before the scored range.
-    start = time.perf_counter()
-    median_model = BackgroundModel.from_sequence(frames[: first - 1], step=2)
-    t_median = time.perf_counter() - start
-    start = time.perf_counter()
-    mean_model = BackgroundModel.from_frames(frames[: first - 1 : 2])
-    t_mean = time.perf_counter() - start
-    print(f"background model from frames 1-{first - 1} (every 2nd): temporal median + MAD "
-          f"{t_median:.1f} s, mean + std {t_mean:.1f} s")
+    # Frame i is frames[i - 1]; the step's frame indexes are 0-based, as here.
+    before = frames[: first - 1]
+    plain = SilhouettesConfig(background=f"frames:0-{first - 2}")
+    models = {}
+    for name, sequence, settings in (
+            (STEP_ROW, before, config),
+            ("ours, whole sequence", frames, config),
+            ("ours (mean + std)", before, plain)):  # fmt: skip
+        used = background_sample(len(sequence), settings)
+        start = time.perf_counter()
+        models[name] = background_model([sequence[i] for i in used], settings)
+        print(f"{name}: background from {len(used)} frames in {used[0] + 1}-{used[-1] + 1}, "
+              f"{time.perf_counter() - start:.2f} s")
 
     rows: dict[str, tuple[Counts, float]] = {}
     pictures: dict[str, dict[int, np.ndarray]] = {}
-    for name, model in (("ours (median + MAD)", median_model),
-                        ("ours (mean + std)", mean_model)):  # fmt: skip
+    for name, model in models.items():
         counts, seconds, shown = Counts(), 0.0, {}
         for i in range(first, last + 1):
             t0 = time.perf_counter()
-            labels = classify(frames[i - 1], model, config)
-            mask = foreground_mask(labels, config)
+            labels = classify(frames[i - 1], model, thresholds)
+            mask = foreground_mask(labels, thresholds)
             seconds += time.perf_counter() - t0
             counts += confusion_counts(mask, truth[i], roi)
             if i in PICTURE_FRAMES:
@@ -105,11 +111,11 @@ def main() -> None:
                        ("KNN (OpenCV default)", cv2.createBackgroundSubtractorKNN)):  # fmt: skip
         rows[name], pictures[name] = _opencv(make, frames, truth, roi, first)
 
-    print(f"{'method':<24}{'precision':>10}{'recall':>8}{'F':>8}{'ms/frame':>10}")
+    print(f"{'method':<26}{'precision':>10}{'recall':>8}{'F':>8}{'ms/frame':>10}")
     for name, (counts, ms) in rows.items():
-        print(f"{name:<24}{counts.precision:>10.3f}{counts.recall:>8.3f}"
+        print(f"{name:<26}{counts.precision:>10.3f}{counts.recall:>8.3f}"
               f"{counts.f_measure:>8.3f}{ms:>10.1f}")
-    ours = rows["ours (median + MAD)"][0].f_measure
+    ours = rows[STEP_ROW][0].f_measure
     print(f"F ratio ours / MOG2: {ours / rows['MOG2 (OpenCV default)'][0].f_measure:.2f}  "
           f"ours / KNN: {ours / rows['KNN (OpenCV default)'][0].f_measure:.2f}")
     print(f"target ours F >= {TARGET_F}: {ours:.3f}  {'PASS' if ours >= TARGET_F else 'FAIL'}")
@@ -139,7 +145,7 @@ def _picture(path: Path, frames: list[np.ndarray], truth: dict[int, np.ndarray],
              pictures: dict[str, dict[int, np.ndarray]]) -> None:
     """One row per frame: the input with the ground-truth outline, then each method's labels
     over the darkened input (red foreground, blue shadow) with the same outline."""
-    names = [n for n in pictures if "mean + std" not in n]
+    names = [n for n in pictures if n == STEP_ROW or not n.startswith("ours")]
     rows = []
     for i in PICTURE_FRAMES:
         if i not in truth:

@@ -1,6 +1,6 @@
 """Protocols of every plugin kind, and the plain data they exchange with the pipeline.
 
-A plugin is a class with:
+A plugin of the pipeline's kinds (intrinsics, dense, mesh, renderer) is a class with:
 
 - ``Options``: a keyword-only dataclass of its settings (each field documented with
   ``metadata={"help": ...}``), filled from ``-O key=value`` on the command line;
@@ -10,11 +10,19 @@ A plugin is a class with:
 
 Plugins never write to the workspace: they return results and the pipeline applies them, so
 that every plugin's output goes through the same atomic, recorded step.
+
+Two kinds drive the pipeline instead, and are built without options: a :class:`Command` is a
+``mocap`` subcommand, a :class:`BatchStep` one step of ``mocap batch``. Both are loaded to list
+them (``mocap --help``, ``mocap plugins``), so their modules import only light things at top
+level and the pipeline code inside their methods.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import argparse
+import contextlib
+from collections.abc import Callable, Mapping
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar, Protocol, runtime_checkable
@@ -140,6 +148,111 @@ class SilhouetteRenderer(Protocol):
 
     def render(self, vertices_in_world: Any, faces: Any, camera: Any) -> Any:
         """vertices (V, 3) float in metres, faces (F, 3) int, ``camera`` a
-        ``tracking.rig.cameras.Camera`` (typed Any: plugins must not import tracking) ->
+        ``tracking.rig.cameras.Camera`` (typed Any: plugins never depend on the tracking
+        package) ->
         (camera.height, camera.width) bool mask, True where the pixel centre sees the mesh."""
         ...
+
+
+@runtime_checkable
+class Command(Protocol):
+    """One ``mocap`` subcommand; its name is its entry point's name (group ``mocap.commands``).
+
+    ``mocap --help`` imports every command's module to list its ``help``, so a command imports
+    what it runs inside ``add_arguments`` and ``run``, never at module level.
+    """
+
+    help: ClassVar[str]
+    """One line, listed by ``mocap --help``."""
+    description: ClassVar[str]
+    """The paragraph of ``mocap NAME --help`` ("" for none)."""
+
+    def add_arguments(self, parser: argparse.ArgumentParser) -> None:
+        """Add the command's flags to its own parser (built only when it is invoked)."""
+        ...
+
+    def run(self, args: argparse.Namespace) -> None:
+        """Do the work and print the outcome; raise ``UserError`` or ``PluginError`` for a
+        one-line error (exit code 2)."""
+        ...
+
+
+@dataclass(frozen=True, kw_only=True)
+class StepResult:
+    summary: Mapping[str, Any]
+    """JSON-serialisable figures of the step (as its run record stores them)."""
+    reused: bool = False
+    """Whether the workspace already held the step's up-to-date outputs."""
+
+
+ItemMap = Callable[..., list[Any]]
+"""``map_fn(fn, items, *shared) -> [fn(item, *shared) for item in items]``, in input order,
+however it runs them (``mocap batch`` runs them as Dask tasks)."""
+
+
+@runtime_checkable
+class BatchStep(Protocol):
+    """One step of ``mocap batch``; its name is its entry point's name (group ``mocap.steps``).
+
+    A workspace kind's pipeline is the chain of the steps of that kind, each after the one it
+    ``follows``: registering steps of a kind, or one following the last step of a pipeline,
+    extends ``mocap batch`` with no change to it. Instances travel to the workers with their
+    tasks, so they are small and picklable.
+    """
+
+    description: ClassVar[str]
+    workspace: ClassVar[str]
+    """The kind of workspace it applies to, as the workspace contract names them ("photo":
+    made with ``mocap init``; "video": has cameras.json); skipped with a reason on others."""
+    follows: ClassVar[str | None]
+    """The step it runs after in its kind's pipeline, or None for the first."""
+
+    def add_arguments(self, parser: argparse.ArgumentParser) -> None:
+        """Add the flags of its settings to ``mocap batch``'s parser."""
+        ...
+
+    def settings(self, args: argparse.Namespace | None) -> Any:
+        """Its settings (picklable) from ``mocap batch``'s flags; None: the defaults."""
+        ...
+
+    def run(self, workspace: Path, settings: Any, *, overwrite: bool) -> StepResult:
+        """Run on one workspace through its run record: idempotent, reusing up-to-date
+        outputs unless ``overwrite``. Raises ``UserError`` for the workspace's own failures."""
+        ...
+
+    def skip_reason(self, workspace: Path) -> str | None:
+        """Why it does not apply to this workspace of its kind (nothing fails), or None."""
+        ...
+
+    def fan_out(self, map_fn: ItemMap) -> AbstractContextManager[None]:
+        """A block within which ``run`` hands its independent items (stereo pairs, cameras)
+        to ``map_fn``; results must not depend on it."""
+        ...
+
+    def figure(self, summary: Mapping[str, Any]) -> str:
+        """A short figure of its result for the batch report (``"[120 faces]"``), or ""."""
+        ...
+
+
+class BaseBatchStep:
+    """Optional base class of batch steps: no flags, default settings None, always applies,
+    nothing to fan out, no figure."""
+
+    description: ClassVar[str]
+    workspace: ClassVar[str]
+    follows: ClassVar[str | None] = None
+
+    def add_arguments(self, parser: argparse.ArgumentParser) -> None:
+        return None
+
+    def settings(self, args: argparse.Namespace | None) -> Any:
+        return None
+
+    def skip_reason(self, workspace: Path) -> str | None:
+        return None
+
+    def fan_out(self, map_fn: ItemMap) -> AbstractContextManager[None]:
+        return contextlib.nullcontext()
+
+    def figure(self, summary: Mapping[str, Any]) -> str:
+        return ""

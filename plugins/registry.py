@@ -4,6 +4,9 @@ Third-party packages add a plugin by declaring, in their own ``pyproject.toml``:
 
     [project.entry-points."mocap.intrinsics"]
     my-init = "my_package.module:MyInitialiser"
+
+The ``mocap`` subcommands and the steps of ``mocap batch``, ours included, are plugins too
+(groups ``mocap.commands`` and ``mocap.steps``).
 """
 
 from __future__ import annotations
@@ -14,7 +17,14 @@ from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
 from plugins.options import OptionsError, describe_options, parse_options
-from plugins.protocols import DenseBackend, IntrinsicInitialiser, MeshBackend, SilhouetteRenderer
+from plugins.protocols import (
+    BatchStep,
+    Command,
+    DenseBackend,
+    IntrinsicInitialiser,
+    MeshBackend,
+    SilhouetteRenderer,
+)
 
 
 class PluginError(Exception):
@@ -26,12 +36,27 @@ class PluginKind:
     name: str
     group: str
     protocol: type
-    method: str
+    methods: tuple[str, ...]
+    """Methods a plugin of this kind must have."""
     summary: str
-    choose_flag: str
+    choose_flag: str | None = None
     """The CLI flag that picks a plugin of this kind."""
-    option_flag: str
+    option_flag: str | None = None
     """The CLI flag that passes options to this kind's plugins."""
+    usage: str | None = None
+    """How a plugin of a kind that no flag picks is used, for ``mocap plugins``."""
+    attributes: tuple[tuple[str, type | tuple[type, ...]], ...] = (("description", str),)
+    """Class attributes a plugin of this kind must have, and their types."""
+    options: bool = True
+    """Whether its plugins take an ``Options`` dataclass (else they are built with no
+    arguments)."""
+    line: str = "description"
+    """The attribute that describes a plugin in one line."""
+
+    def how_to_use(self) -> str:
+        if self.choose_flag is None:
+            return self.usage or ""
+        return f"choose with {self.choose_flag} NAME; options with {self.option_flag} KEY=VALUE"
 
 
 KINDS: dict[str, PluginKind] = {
@@ -39,7 +64,7 @@ KINDS: dict[str, PluginKind] = {
         name="intrinsics",
         group="mocap.intrinsics",
         protocol=IntrinsicInitialiser,
-        method="initialise",
+        methods=("initialise",),
         summary="intrinsic initialisers: set each camera's focal prior before mapping",
         choose_flag="--intrinsics",
         option_flag="-O",
@@ -48,7 +73,7 @@ KINDS: dict[str, PluginKind] = {
         name="dense",
         group="mocap.dense",
         protocol=DenseBackend,
-        method="densify",
+        methods=("densify",),
         summary="dense backends: undistorted images and poses → coloured point cloud",
         choose_flag="--dense",
         option_flag="--dense-option",
@@ -57,7 +82,7 @@ KINDS: dict[str, PluginKind] = {
         name="mesh",
         group="mocap.mesh",
         protocol=MeshBackend,
-        method="mesh",
+        methods=("mesh",),
         summary="mesh backends: oriented point cloud → triangle mesh with vertex colours",
         choose_flag="--mesher",
         option_flag="--mesh-option",
@@ -66,10 +91,32 @@ KINDS: dict[str, PluginKind] = {
         name="renderer",
         group="mocap.renderer",
         protocol=SilhouetteRenderer,
-        method="render",
+        methods=("render",),
         summary="silhouette renderers: posed body mesh + camera → boolean mask",
         choose_flag="--renderer",
         option_flag="--renderer-option",
+    ),
+    "command": PluginKind(
+        name="command",
+        group="mocap.commands",
+        protocol=Command,
+        methods=("add_arguments", "run"),
+        summary="commands: the subcommands of mocap",
+        usage="run with mocap NAME; its flags with mocap NAME --help",
+        attributes=(("help", str), ("description", str)),
+        options=False,
+        line="help",
+    ),
+    "step": PluginKind(
+        name="step",
+        group="mocap.steps",
+        protocol=BatchStep,
+        methods=("add_arguments", "settings", "run", "skip_reason", "fan_out", "figure"),
+        summary="batch steps: one step of a workspace kind's pipeline, as mocap batch runs it",
+        usage="run with mocap batch WS... --steps NAME,...; by default every step of each "
+        "workspace's kind",
+        attributes=(("description", str), ("workspace", str), ("follows", (str, type(None)))),
+        options=False,
     ),
 }
 
@@ -93,50 +140,76 @@ def _kind(kind: str) -> PluginKind:
         raise PluginError(f"unknown plugin kind {kind!r}; kinds: {', '.join(KINDS)}") from None
 
 
-def _entry_points(kind: str) -> dict[str, EntryPoint]:
+def _entry_points(kind: str) -> tuple[dict[str, EntryPoint], dict[str, str]]:
+    """The entry points of ``kind`` by name, and why some names cannot be loaded: two
+    distributions declaring the same name is ambiguous, so that name is refused rather than
+    one picked (the kind's other plugins still load)."""
     found: dict[str, EntryPoint] = {}
+    clashes: dict[str, str] = {}
     for ep in entry_points(group=_kind(kind).group):
-        # Two distributions declaring the same name is ambiguous: refuse rather than pick one.
         if ep.name in found and found[ep.name].value != ep.value:
-            raise PluginError(
-                f"{kind} plugin {ep.name!r} is declared twice: "
-                f"{found[ep.name].value} and {ep.value}"
-            )
-        found[ep.name] = ep
-    return found
+            clashes[ep.name] = (f"{kind} plugin {ep.name!r} is declared twice: "
+                                f"{found[ep.name].value} and {ep.value}")
+        found.setdefault(ep.name, ep)
+    return found, clashes
 
 
 def available(kind: str) -> list[str]:
-    return sorted(_entry_points(kind))
+    return sorted(_entry_points(kind)[0])
+
+
+def _type_words(types: type | tuple[type, ...]) -> str:
+    if types is str:
+        return "string"
+    names = [t.__name__ for t in (types if isinstance(types, tuple) else (types,))]
+    return "of type " + " | ".join("None" if n == "NoneType" else n for n in names)
 
 
 def load(kind: str, name: str) -> type:
     """The plugin class registered as ``name`` for ``kind``, checked against the Protocol."""
-    spec = _kind(kind)
-    eps = _entry_points(kind)
+    eps, clashes = _entry_points(kind)
     if name not in eps:
         names = ", ".join(sorted(eps)) or "none registered"
         raise PluginError(f"unknown {kind} plugin {name!r}; available: {names}")
+    return _load(kind, name, eps[name], clashes.get(name))
+
+
+def load_all(kind: str) -> tuple[dict[str, type], dict[str, PluginError]]:
+    """Every plugin class of ``kind`` by name (sorted), and the error of each broken one."""
+    eps, clashes = _entry_points(kind)
+    loaded: dict[str, type] = {}
+    broken: dict[str, PluginError] = {}
+    for name in sorted(eps):
+        try:
+            loaded[name] = _load(kind, name, eps[name], clashes.get(name))
+        except PluginError as exc:
+            broken[name] = exc
+    return loaded, broken
+
+
+def _load(kind: str, name: str, ep: EntryPoint, clash: str | None) -> type:
+    spec = _kind(kind)
+    if clash is not None:
+        raise PluginError(clash)
     try:
-        cls = eps[name].load()
+        cls = ep.load()
     except Exception as exc:  # noqa: BLE001 - any import failure is the plugin's fault
-        raise PluginError(
-            f"{kind} plugin {name!r} ({eps[name].value}) failed to import: {exc}"
-        ) from exc
+        raise PluginError(f"{kind} plugin {name!r} ({ep.value}) failed to import: {exc}") from exc
     problems = []
     if not isinstance(cls, type):
         problems.append("is not a class")
     else:
         options = getattr(cls, "Options", None)
-        if options is None or not dataclasses.is_dataclass(options):
+        if spec.options and (options is None or not dataclasses.is_dataclass(options)):
             problems.append("has no `Options` dataclass")
-        if not isinstance(getattr(cls, "description", None), str):
-            problems.append("has no `description` string")
-        if not callable(getattr(cls, spec.method, None)):
-            problems.append(f"has no `{spec.method}` method")
+        for attribute, types in spec.attributes:
+            if not hasattr(cls, attribute) or not isinstance(getattr(cls, attribute), types):
+                problems.append(f"has no `{attribute}` {_type_words(types)}")
+        problems += [f"has no `{m}` method" for m in spec.methods
+                     if not callable(getattr(cls, m, None))]
     if problems:
         raise PluginError(
-            f"{kind} plugin {name!r} ({eps[name].value}) does not satisfy "
+            f"{kind} plugin {name!r} ({ep.value}) does not satisfy "
             f"{spec.protocol.__name__}: it {', '.join(problems)}"
         )
     return cls
@@ -144,28 +217,43 @@ def load(kind: str, name: str) -> type:
 
 def create(kind: str, name: str, options: list[str] | tuple[str, ...] = ()) -> Any:
     """Instantiate a plugin with options given as ``key=value`` strings."""
-    cls = load(kind, name)
-    try:
-        parsed = parse_options(cls.Options, options)
-    except OptionsError as exc:
-        raise PluginError(f"{kind} plugin {name!r}: {exc}") from None
-    instance = cls(parsed)
-    if not isinstance(instance, _kind(kind).protocol):
+    return instantiate(kind, name, load(kind, name), options)
+
+
+def instantiate(kind: str, name: str, cls: type,
+                options: list[str] | tuple[str, ...] = ()) -> Any:
+    """An instance of the loaded plugin class ``cls`` (as :func:`create` makes it)."""
+    spec = _kind(kind)
+    if not spec.options:
+        if options:
+            raise PluginError(f"{kind} plugin {name!r} takes no options")
+        instance = cls()
+    else:
+        try:
+            parsed = parse_options(cls.Options, options)
+        except OptionsError as exc:
+            raise PluginError(f"{kind} plugin {name!r}: {exc}") from None
+        instance = cls(parsed)
+    if not isinstance(instance, spec.protocol):
         raise PluginError(f"{kind} plugin {name!r} does not satisfy its Protocol")
     return instance
 
 
-def list_plugins() -> list[PluginInfo]:
-    """Every registered plugin of every kind. Import failures are reported, not raised."""
+def list_plugins(kinds: tuple[str, ...] | None = None) -> list[PluginInfo]:
+    """Every registered plugin of every kind (or of ``kinds``). Import failures are reported,
+    not raised."""
     infos = []
-    for kind in KINDS:
-        for name, ep in sorted(_entry_points(kind).items()):
+    for kind in kinds or tuple(KINDS):
+        spec = _kind(kind)
+        eps = _entry_points(kind)[0]
+        loaded, broken = load_all(kind)
+        for name, ep in sorted(eps.items()):
             dist = ep.dist.name if ep.dist is not None else "?"
-            try:
-                cls = load(kind, name)
-                description = cls.description
-                opts = describe_options(cls.Options)
-            except PluginError as exc:
-                description, opts = f"BROKEN: {exc}", ()
+            if name in broken:
+                description, opts = f"BROKEN: {broken[name]}", ()
+            else:
+                cls = loaded[name]
+                description = getattr(cls, spec.line)
+                opts = describe_options(cls.Options) if spec.options else ()
             infos.append(PluginInfo(kind, name, ep.value, dist, description, opts))
     return infos

@@ -3,18 +3,24 @@
 Scaling out is Dask's job (``dask.distributed``), which users already run on Kubernetes, HPC
 schedulers and the cloud; this module only describes the work as tasks:
 
-* each workspace's steps (``sfm`` → ``dense`` → ``mesh`` for a photo workspace,
-  ``silhouettes`` → ``track`` for a video workspace, one with cameras.json) are a chain of
-  tasks, one per step; chains of different workspaces (sequences) are independent and run side
-  by side; tracking, sequential in time, stays one task per sequence; a step that does not
-  apply to a workspace is skipped with its reason (a synthetic workspace's silhouettes are
+* the steps are plugins (kind ``step``, entry-point group ``mocap.steps``,
+  :class:`plugins.protocols.BatchStep`), each of one workspace kind (:attr:`Workspace.kind
+  <recon.workspace.Workspace.kind>`): ``sfm`` → ``dense`` → ``mesh`` for a photo workspace
+  (:mod:`recon.batch_steps`), ``silhouettes`` → ``track`` for a video workspace, one with
+  cameras.json (registered by the tracking package). A kind's pipeline is the chain of its
+  steps, each after the one it ``follows``, so a new pipeline, or a step at the end of one, is
+  a matter of registering entry points;
+* each workspace's steps are a chain of tasks, one per step; chains of different workspaces
+  (sequences) are independent and run side by side; a step that does not apply to a workspace
+  is skipped with its reason (another kind's step; a synthetic workspace's silhouettes are
   given), which fails nothing;
-* within a ``silhouettes`` task, each camera's background model is a task of its own, then
-  each run of about a dozen of a camera's frames (decoding, classification, masks) is one, the
-  models sent once to the workers as :func:`map_ordered`'s shared argument
-  (:func:`tracking.silhouettes.step.cameras_mapped_by`), submitted from the worker;
-* within a ``dense`` task, the stereo pairs of the cpu-stereo backend are tasks of their own
-  (:func:`recon.dense.backends.stereo_pairs_mapped_by`), submitted from the worker;
+* within a step's task, the step may fan its independent items out as tasks of their own
+  (:meth:`BatchStep.fan_out <plugins.protocols.BatchStep.fan_out>`, with
+  :func:`map_ordered` submitted from the worker): ``dense`` its stereo pairs
+  (:func:`recon.dense.backends.stereo_pairs_mapped_by`); ``silhouettes`` each camera's
+  background model, then each run of about a dozen of a camera's frames (decoding,
+  classification, masks), the models sent once to the workers as :func:`map_ordered`'s shared
+  argument; tracking, sequential in time, stays one task per sequence;
 * :func:`map_ordered` gives the same per-item fan-out to other code, serially when there is no
   client.
 
@@ -30,6 +36,7 @@ file system every worker sees at the same path (paths are made absolute before s
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import enum
 import importlib
@@ -37,51 +44,121 @@ import sys
 import time
 import traceback
 import uuid
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from recon.configs import add_config_arguments
 from recon.errors import UserError
 
 if TYPE_CHECKING:
     from distributed import Client, Future
 
-    from recon.dense.step import DenseConfig
-    from recon.mesh.step import MeshConfig
-    from recon.sfm.pipeline import SfMConfig
-    from tracking.silhouettes.step import SilhouettesConfig
-    from tracking.track.step import TrackStepConfig
-    from tracking.track.tracker import TrackConfig
+    from plugins.protocols import BatchStep
+    from plugins.registry import PluginError
+
+DEFAULT_KIND = "photo"
+"""The pipeline of a folder that is no workspace: its first step says what is missing."""
 
 
-class BatchStep(enum.StrEnum):
-    SFM = "sfm"
-    DENSE = "dense"
-    MESH = "mesh"
-    SILHOUETTES = "silhouettes"
-    TRACK = "track"
+@dataclass(frozen=True)
+class Steps:
+    """The registered batch steps that load, in pipeline order (kinds: photo first, then by
+    name; within a kind, each after the step it follows), and those that do not."""
+
+    steps: dict[str, BatchStep]
+    broken: dict[str, PluginError]
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(self.steps)
+
+    def of_kind(self, kind: str) -> tuple[str, ...]:
+        """The pipeline of a workspace kind: its steps in order."""
+        return tuple(n for n, s in self.steps.items() if s.workspace == kind)
+
+    def kinds(self) -> tuple[str, ...]:
+        return tuple(dict.fromkeys(s.workspace for s in self.steps.values()))
+
+    def ordered(self, names: Sequence[str]) -> tuple[str, ...]:
+        """``names`` in pipeline order; a one-line error for an unknown or broken step."""
+        for name in names:
+            if name in self.broken:
+                raise self.broken[name]
+        unknown = [n for n in names if n not in self.steps]
+        if unknown:
+            raise UserError(f"unknown batch step(s) {', '.join(unknown)}; steps: "
+                            f"{', '.join(self.names)}")
+        return tuple(n for n in self.steps if n in set(names))
 
 
-ALL_STEPS: tuple[BatchStep, ...] = tuple(BatchStep)
-PHOTO_STEPS: tuple[BatchStep, ...] = (BatchStep.SFM, BatchStep.DENSE, BatchStep.MESH)
-"""The steps of a photo workspace (`mocap init`), and its default."""
-VIDEO_STEPS: tuple[BatchStep, ...] = (BatchStep.SILHOUETTES, BatchStep.TRACK)
-"""The steps of a video workspace (one with cameras.json), and its default."""
+def registered_steps() -> Steps:
+    """Every batch step of the entry-point group ``mocap.steps``, loaded and ordered."""
+    from plugins.registry import PluginError, instantiate, load_all
+
+    classes, broken = load_all("step")
+    loaded: dict[str, BatchStep] = {}
+    for name, cls in classes.items():
+        try:
+            loaded[name] = instantiate("step", name, cls)
+        except PluginError as exc:
+            broken[name] = exc
+    kinds = sorted({s.workspace for s in loaded.values()}, key=lambda k: (k != DEFAULT_KIND, k))
+    order: list[str] = []
+
+    def place(name: str, seen: tuple[str, ...] = ()) -> None:
+        follows = loaded[name].follows
+        if (follows in loaded and loaded[follows].workspace == loaded[name].workspace
+                and follows not in seen):
+            place(follows, (*seen, name))
+        if name not in order:
+            order.append(name)
+
+    for kind in kinds:
+        for name in sorted(n for n, s in loaded.items() if s.workspace == kind):
+            place(name)
+    return Steps({n: loaded[n] for n in order}, broken)
 
 
-def parse_steps(text: str | None) -> tuple[BatchStep, ...] | None:
-    """``"sfm,dense,mesh"`` → steps in pipeline order (the order given does not matter);
-    None → None: each workspace's own steps (photo or video)."""
+def parse_steps(text: str | None, steps: Steps | None = None) -> tuple[str, ...] | None:
+    """``"sfm,dense,mesh"`` → step names in pipeline order (the order given does not matter);
+    None → None: each workspace's own steps (those of its kind)."""
     if text is None:
         return None
+    steps = steps or registered_steps()
     names = [n.strip() for n in text.split(",") if n.strip()]
-    unknown = [n for n in names if n not in {s.value for s in BatchStep}]
+    unknown = [n for n in names if n not in steps.steps and n not in steps.broken]
     if unknown or not names:
         raise UserError(
-            f"--steps {text!r}: choose from {', '.join(ALL_STEPS)} (comma-separated)"
+            f"--steps {text!r}: choose from {', '.join(steps.names)} (comma-separated)"
         )
-    return tuple(s for s in ALL_STEPS if s in names)
+    return steps.ordered(names)
+
+
+def add_step_arguments(parser: argparse.ArgumentParser, steps: Steps | None = None) -> None:
+    """``--steps`` and every step's flags, for ``mocap batch``."""
+    steps = steps or registered_steps()
+    pipelines = ", ".join(f"{','.join(steps.of_kind(k))} ({k} workspaces)" for k in steps.kinds())
+    parser.add_argument("--steps", dest="batch_steps", default=None, metavar="STEPS",
+                        help=f"steps to run, comma-separated: {pipelines}; a step that does not "
+                        "apply to a workspace is skipped (default: all steps of each "
+                        "workspace's kind)")
+    parser.add_argument("--overwrite", action="store_true", help="recompute every step")
+    add_config_arguments(parser, BatchConfig, exclude=("steps",))
+    for name, step in steps.steps.items():
+        try:
+            step.add_arguments(parser)
+        except Exception as exc:  # a third-party step's flags may clash with another's
+            from plugins.registry import PluginError
+
+            raise PluginError(f"step plugin {name!r} cannot add its flags: {exc}") from exc
+
+
+def step_settings(args: argparse.Namespace, steps: Steps | None = None) -> dict[str, Any]:
+    """Each step's settings from ``mocap batch``'s flags."""
+    steps = steps or registered_steps()
+    return {name: step.settings(args) for name, step in steps.steps.items()}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -96,10 +173,10 @@ class BatchConfig:
             "metavar": "ADDRESS",
         },
     )
-    steps: tuple[BatchStep, ...] | None = field(
+    steps: tuple[str, ...] | None = field(
         default=None,
-        metadata={"help": "steps to run, comma-separated: sfm,dense,mesh (photo workspaces), "
-                  "silhouettes,track (video workspaces); default: all of a workspace's kind"},
+        metadata={"help": "steps to run, by name (`mocap plugins` lists them); default: all "
+                  "of a workspace's kind"},
     )
     workers: int | None = field(
         default=None,
@@ -136,7 +213,7 @@ class StepStatus(enum.StrEnum):
 
 @dataclass(frozen=True)
 class StepOutcome:
-    step: BatchStep
+    step: str
     status: StepStatus
     seconds: float = 0.0
     summary: dict[str, Any] = field(default_factory=dict)
@@ -147,6 +224,8 @@ class StepOutcome:
     """The traceback of an unexpected error (not a UserError)."""
     reason: str | None = None
     """Why a step was skipped although nothing failed (it does not apply to the workspace)."""
+    figure: str = ""
+    """The step's short figure of its result for the report line (``[120 faces]``)."""
 
     @property
     def ok(self) -> bool:
@@ -176,25 +255,9 @@ class WorkspaceResult:
             if s.status is StepStatus.SKIPPED:
                 parts.append(f"{s.step} skipped ({s.reason})")
                 continue
-            figure = _figure(s)
-            parts.append(f"{s.step} {s.seconds:.1f}s" + (f" {figure}" if figure else "")
+            parts.append(f"{s.step} {s.seconds:.1f}s" + (f" {s.figure}" if s.figure else "")
                          + (" (reused)" if s.status is StepStatus.REUSED else ""))
         return f"{self.workspace}  " + "  ".join(parts)
-
-
-def _figure(outcome: StepOutcome) -> str:
-    summary = outcome.summary
-    if outcome.step is BatchStep.SFM and "registered" in summary:
-        return f"[{summary['registered']}/{summary['images']} images, {summary['points']} points]"
-    if outcome.step is BatchStep.DENSE and "points" in summary:
-        return f"[{summary['points']} points]"
-    if outcome.step is BatchStep.MESH and "faces" in summary:
-        return f"[{summary['faces']} faces]"
-    if outcome.step is BatchStep.SILHOUETTES and "cameras" in summary:
-        return f"[{len(summary['cameras'])} cameras x {summary['processed']} frames]"
-    if outcome.step is BatchStep.TRACK and "tracked" in summary:
-        return f"[{summary['tracked']}/{summary['frames']} frames tracked]"
-    return ""
 
 
 @dataclass(frozen=True)
@@ -223,12 +286,8 @@ class BatchReport:
 class _Settings:
     """What every step task of a batch needs; small and picklable."""
 
-    sfm: Any
-    dense: Any
-    mesh: Any
-    silhouettes: Any
-    track_step: Any
-    track: Any
+    steps: dict[str, Any]
+    """Each step's settings, by name."""
     overwrite: bool
     pair_tasks: bool
     colmap_log_level: int
@@ -275,97 +334,38 @@ def _map_on_this_cluster(fn: Callable[..., Any], items: Sequence[Any], *shared: 
 
 
 # One workspace ------------------------------------------------------------------------------------
-def _run_step(root: Path, step: BatchStep, settings: _Settings) -> StepOutcome:
+def _run_step(root: Path, name: str, step: BatchStep, settings: _Settings) -> StepOutcome:
     """One step of one workspace, through the workspace contract; raises on failure."""
-    from recon.dense.step import densify
-    from recon.mesh.step import make_mesh
-    from recon.sfm.pipeline import STEPS
-    from recon.workspace import Timer, Workspace
+    from recon.workspace import Timer
 
-    if step in VIDEO_STEPS:
-        return _run_video_step(root, step, settings)
-    ws = Workspace.open(root)
     with Timer() as timer:
-        if step is BatchStep.SFM:
-            # `run_sfm` without its deferred recordings: they would overlap mapping only to use
-            # a core that a batch keeps busy anyway, and their read of the database, right as
-            # mapping opens it, can fail with "database is locked" in a warm worker process
-            # (seen 1 in 32 workspaces under load; a fresh process is slowed by importing rerun).
-            reused = True
-            for name, sfm_step in STEPS:
-                before = ws.step(name)
-                record = sfm_step(ws, settings.sfm, overwrite=settings.overwrite, recordings=None)
-                reused = reused and before == record
-            summary = record.summary
-        else:
-            name = step.value
-            before = ws.step(name)
-            if step is BatchStep.DENSE:
-                record = densify(ws, settings.dense, overwrite=settings.overwrite)
-            else:
-                record = make_mesh(ws, settings.mesh, overwrite=settings.overwrite)
-            reused = before is not None and before == record
-            summary = record.summary
-    status = StepStatus.REUSED if reused else StepStatus.DONE
-    return StepOutcome(step, status, timer.seconds, dict(summary))
-
-
-def _run_video_step(root: Path, step: BatchStep, settings: _Settings) -> StepOutcome:
-    """``silhouettes`` or ``track`` of one video workspace; raises on failure."""
-    from recon.workspace import Timer, Workspace
-    from tracking.silhouettes.step import make_silhouettes
-    from tracking.track.step import track_workspace
-
-    ws = Workspace.open_video(root)
-    with Timer() as timer:
-        if step is BatchStep.SILHOUETTES:
-            before = ws.step("silhouettes")
-            record = make_silhouettes(ws, settings.silhouettes, overwrite=settings.overwrite)
-            reused = before is not None and before == record
-            summary = dict(record.summary)
-        else:
-            summary = track_workspace(ws, settings.track_step, settings.track,
-                                      overwrite=settings.overwrite, progress=False)
-            reused = bool(summary.pop("up_to_date", False))
-    status = StepStatus.REUSED if reused else StepStatus.DONE
-    return StepOutcome(step, status, timer.seconds, summary)
-
-
-def _kind(root: Path) -> str | None:
-    """``"video"`` (cameras.json), ``"photo"`` (images/), or None: not a workspace (its steps
-    then fail with the workspace's own message)."""
-    if (root / "cameras.json").is_file():
-        return "video"
-    if (root / "images").is_dir():
-        return "photo"
-    return None
+        result = step.run(root, settings.steps[name], overwrite=settings.overwrite)
+    status = StepStatus.REUSED if result.reused else StepStatus.DONE
+    return StepOutcome(name, status, timer.seconds, dict(result.summary),
+                       figure=step.figure(result.summary))
 
 
 def _not_applicable(root: Path, step: BatchStep) -> str | None:
     """Why ``step`` does not apply to the workspace at ``root``, or None when it does."""
-    kind = _kind(root)
-    if kind == "video" and step in PHOTO_STEPS:
-        return "not a photo workspace (it has cameras.json)"
-    if kind == "photo" and step in VIDEO_STEPS:
-        return "not a video workspace (no cameras.json)"
-    if (step is BatchStep.SILHOUETTES and kind == "video" and not (root / "videos").is_dir()
-            and (root / "run.json").is_file()):
-        from recon.workspace import Workspace
+    from recon.workspace import Workspace
 
-        if Workspace(root).step("synth") is not None:
-            return "silhouettes given (synthetic)"
-    return None
+    ws = Workspace(root)
+    if (mismatch := ws.kind_mismatch(step.workspace)) is not None:
+        return mismatch
+    return step.skip_reason(root) if ws.kind == step.workspace else None
 
 
-def _steps_for(root: Path, steps: Sequence[BatchStep] | None) -> tuple[BatchStep, ...]:
+def _steps_for(root: Path, steps: Sequence[str] | None, registered: Steps) -> tuple[str, ...]:
     """The steps to run on one workspace: ``steps`` in pipeline order, or by default those of
     its kind (a folder that is no workspace gets the photo steps, which say so)."""
+    from recon.workspace import Workspace
+
     if steps is None:
-        return VIDEO_STEPS if _kind(root) == "video" else PHOTO_STEPS
-    return _ordered(steps)
+        return registered.of_kind(Workspace(root).kind or DEFAULT_KIND)
+    return registered.ordered(steps)
 
 
-def _failed(step: BatchStep, exc: BaseException, seconds: float) -> StepOutcome:
+def _failed(step: str, exc: BaseException, seconds: float) -> StepOutcome:
     from plugins.registry import PluginError
 
     if isinstance(exc, (UserError, PluginError)):
@@ -375,63 +375,53 @@ def _failed(step: BatchStep, exc: BaseException, seconds: float) -> StepOutcome:
                        error=f"{type(exc).__name__}: {exc}", detail=detail)
 
 
-def _guarded_step(root: Path, step: BatchStep, settings: _Settings) -> StepOutcome:
+def _guarded_step(root: Path, name: str, step: BatchStep, settings: _Settings) -> StepOutcome:
     start = time.perf_counter()
     try:
         if (reason := _not_applicable(root, step)) is not None:
-            return StepOutcome(step, StepStatus.SKIPPED, reason=reason)
-        return _run_step(root, step, settings)
+            return StepOutcome(name, StepStatus.SKIPPED, reason=reason)
+        return _run_step(root, name, step, settings)
     except Exception as exc:  # one workspace's failure must not stop the batch
-        return _failed(step, exc, time.perf_counter() - start)
+        return _failed(name, exc, time.perf_counter() - start)
 
 
 def run_workspace(
     workspace: Path | str,
-    steps: Sequence[BatchStep] | None = None,
-    sfm: SfMConfig | None = None,
-    dense: DenseConfig | None = None,
-    mesh: MeshConfig | None = None,
+    steps: Sequence[str] | None = None,
+    settings: Mapping[str, Any] | None = None,
     *,
     overwrite: bool = False,
-    silhouettes: SilhouettesConfig | None = None,
-    track_step: TrackStepConfig | None = None,
-    track: TrackConfig | None = None,
 ) -> WorkspaceResult:
     """The steps of one workspace in this process, one after the other: what a batch task
     chain does, and the serial reference its results are compared with. ``steps`` None: those
-    of the workspace's kind (:data:`PHOTO_STEPS` or :data:`VIDEO_STEPS`)."""
-    settings = _settings(sfm, dense, mesh, overwrite=overwrite, pair_tasks=False,
-                         silhouettes=silhouettes, track_step=track_step, track=track)
+    of the workspace's kind. ``settings``: settings by step name (``{"sfm": SfMConfig(...)}``);
+    a step left out runs with its defaults."""
+    registered = registered_steps()
+    batch = _settings(settings, registered, overwrite=overwrite, pair_tasks=False)
     root = Path(workspace)
     outcomes: list[StepOutcome] = []
-    for step in _steps_for(root, steps):
+    for name in _steps_for(root, steps, registered):
         if outcomes and not outcomes[-1].ok:
-            outcomes.append(StepOutcome(step, StepStatus.SKIPPED))
+            outcomes.append(StepOutcome(name, StepStatus.SKIPPED))
         else:
-            outcomes.append(_guarded_step(root, step, settings))
+            outcomes.append(_guarded_step(root, name, registered.steps[name], batch))
     return WorkspaceResult(root, tuple(outcomes))
 
 
-def _ordered(steps: Sequence[BatchStep]) -> tuple[BatchStep, ...]:
-    return tuple(s for s in ALL_STEPS if s in set(steps))
-
-
-def _settings(sfm: Any, dense: Any, mesh: Any, *, overwrite: bool, pair_tasks: bool,
-              silhouettes: Any = None, track_step: Any = None, track: Any = None) -> _Settings:
+def _settings(settings: Mapping[str, Any] | None, registered: Steps, *, overwrite: bool,
+              pair_tasks: bool) -> _Settings:
     import pycolmap
 
-    from recon.dense.step import DenseConfig
-    from recon.mesh.step import MeshConfig
-    from recon.sfm.pipeline import SfMConfig
-    from tracking.silhouettes.step import SilhouettesConfig
-    from tracking.track.step import TrackStepConfig
-    from tracking.track.tracker import TrackConfig
-
-    return _Settings(sfm=sfm or SfMConfig(), dense=dense or DenseConfig(),
-                     mesh=mesh or MeshConfig(), silhouettes=silhouettes or SilhouettesConfig(),
-                     track_step=track_step or TrackStepConfig(), track=track or TrackConfig(),
-                     overwrite=overwrite, pair_tasks=pair_tasks,
-                     colmap_log_level=int(pycolmap.logging.minloglevel))
+    given = dict(settings or {})
+    unknown = sorted(set(given) - set(registered.steps))
+    if unknown:
+        raise UserError(f"settings of unknown batch step(s) {', '.join(unknown)}; steps: "
+                        f"{', '.join(registered.names)}")
+    return _Settings(
+        steps={name: given[name] if given.get(name) is not None else step.settings(None)
+               for name, step in registered.steps.items()},
+        overwrite=overwrite, pair_tasks=pair_tasks,
+        colmap_log_level=int(pycolmap.logging.minloglevel))
 
 
 # The Dask side ----------------------------------------------------------------------------------
@@ -479,24 +469,19 @@ def _worker_plugin() -> Any:
     return MocapWorkerSetup()
 
 
-def _step_task(root: str, step: BatchStep, settings: _Settings,
+def _step_task(root: str, name: str, step: BatchStep, settings: _Settings,
                upstream: StepOutcome | None) -> StepOutcome:
     """A Dask task: one step of one workspace, skipped when the step before it did not
     succeed. Returns its outcome and never raises for the workspace's own errors."""
     import pycolmap
 
-    from recon.dense.backends import stereo_pairs_mapped_by
-    from tracking.silhouettes.step import cameras_mapped_by
-
     if upstream is not None and not upstream.ok:
-        return StepOutcome(step, StepStatus.SKIPPED)
+        return StepOutcome(name, StepStatus.SKIPPED)
     pycolmap.logging.minloglevel = settings.colmap_log_level
     with contextlib.ExitStack() as stack:
-        if step is BatchStep.DENSE and settings.pair_tasks:
-            stack.enter_context(stereo_pairs_mapped_by(_map_on_this_cluster))
-        if step is BatchStep.SILHOUETTES and settings.pair_tasks:
-            stack.enter_context(cameras_mapped_by(_map_on_this_cluster))
-        return _guarded_step(Path(root), step, settings)
+        if settings.pair_tasks:
+            stack.enter_context(step.fan_out(_map_on_this_cluster))
+        return _guarded_step(Path(root), name, step, settings)
 
 
 def _worker_versions() -> dict[str, str]:
@@ -568,22 +553,18 @@ def _check_workers(client: Client) -> list[str]:
 def run_batch(
     workspaces: Sequence[Path | str],
     config: BatchConfig | None = None,
-    sfm: SfMConfig | None = None,
-    dense: DenseConfig | None = None,
-    mesh: MeshConfig | None = None,
+    settings: Mapping[str, Any] | None = None,
     *,
     overwrite: bool = False,
     client: Client | None = None,
     echo: Callable[[str], None] | None = None,
-    silhouettes: SilhouettesConfig | None = None,
-    track_step: TrackStepConfig | None = None,
-    track: TrackConfig | None = None,
 ) -> BatchReport:
     """Run ``config.steps`` of every workspace as Dask tasks; returns one result per workspace.
 
-    ``client`` uses an existing Dask client; otherwise one is made from ``config`` (see
-    :func:`connect`). ``echo`` receives the scheduler and dashboard lines as soon as they are
-    known. A failed workspace is reported in its result; the others go on.
+    ``settings``: settings by step name, as for :func:`run_workspace`. ``client`` uses an
+    existing Dask client; otherwise one is made from ``config`` (see :func:`connect`). ``echo``
+    receives the scheduler and dashboard lines as soon as they are known. A failed workspace is
+    reported in its result; the others go on.
     """
     config = config or BatchConfig()
     roots = [Path(w) for w in workspaces]
@@ -593,8 +574,8 @@ def run_batch(
     if len(set(resolved)) < len(resolved):
         twice = sorted({str(r) for r in roots if resolved.count(r.resolve()) > 1})
         raise UserError(f"workspace given twice: {', '.join(twice)}")
-    settings = _settings(sfm, dense, mesh, overwrite=overwrite, pair_tasks=config.pair_tasks,
-                         silhouettes=silhouettes, track_step=track_step, track=track)
+    registered = registered_steps()
+    batch = _settings(settings, registered, overwrite=overwrite, pair_tasks=config.pair_tasks)
     with contextlib.ExitStack() as stack:
         if client is None:
             client = stack.enter_context(connect(config))
@@ -611,8 +592,8 @@ def run_batch(
             for note in notes:
                 echo(note)
         start = time.perf_counter()
-        steps = [_steps_for(root, config.steps) for root in resolved]
-        outcomes = _submit_and_wait(client, roots, resolved, steps, settings)
+        steps = [_steps_for(root, config.steps, registered) for root in resolved]
+        outcomes = _submit_and_wait(client, roots, resolved, steps, registered, batch)
         seconds = time.perf_counter() - start
     results = tuple(WorkspaceResult(root, tuple(steps)) for root, steps in zip(
         roots, outcomes, strict=True))
@@ -622,7 +603,7 @@ def run_batch(
 
 def _submit_and_wait(
     client: Client, roots: list[Path], resolved: list[Path],
-    steps_of: list[tuple[BatchStep, ...]], settings: _Settings,
+    steps_of: list[tuple[str, ...]], registered: Steps, settings: _Settings,
 ) -> list[list[StepOutcome]]:
     from distributed import as_completed
 
@@ -636,8 +617,8 @@ def _submit_and_wait(
             upstream = chain[-1] if chain else None
             # Readable keys: the dashboard's task stream shows step and workspace.
             key = f"mocap-{step}-{index}-{root.name}-{run}"
-            chain.append(client.submit(_step_task, str(root), step, settings, upstream,
-                                       key=key, pure=False))
+            chain.append(client.submit(_step_task, str(root), step, registered.steps[step],
+                                       settings, upstream, key=key, pure=False))
         chains.append(chain)
     where = {f.key: (i, k) for i, chain in enumerate(chains) for k, f in enumerate(chain)}
     progress = bar(len(where), "batch", "step")
@@ -660,7 +641,7 @@ def _is_failure(future: Future, upstream: Future | None) -> bool:
     return future.result().status is StepStatus.FAILED
 
 
-def _outcome(future: Future, step: BatchStep, before: list[Future]) -> StepOutcome:
+def _outcome(future: Future, step: str, before: list[Future]) -> StepOutcome:
     """A finished task's outcome; a task that erred (its worker died, say) failed, and the
     steps after it, which erred because it did, were skipped."""
     if future.status != "error":

@@ -170,14 +170,15 @@ def run_demo(
     *,
     overwrite: bool = False,
 ) -> DemoReport:
+    from recon.cameras import read_cameras_json
     from recon.dense.step import DenseConfig, densify
-    from recon.evaluation.truth import focal_error, pose_errors, read_truth
+    from recon.evaluation.truth import focal_error, pose_errors
     from recon.mesh.step import MeshConfig, make_mesh
 
     images, truth_path, rendered = make_scene(config)
     ws, _ = Workspace.create(config.out, images, overwrite=rendered or overwrite)
     summary = run_sfm(ws, sfm_config or SfMConfig(), overwrite=overwrite)
-    truth = read_truth(truth_path)
+    truth = {c.name: c for c in read_cameras_json(truth_path)}
     model = pycolmap.Reconstruction(ws.model_dir)
     estimated = cams_from_world(model)
     errors = pose_errors(estimated, {n: t.cam_from_world for n, t in truth.items()})

@@ -192,14 +192,6 @@ def log_series(
     rec.reset_time()
 
 
-def log_scalar(
-    rec: rr.RecordingStream, timeline: str, index: int, entity: str, value: float
-) -> None:
-    rec.set_time(timeline, sequence=index)
-    rec.log(entity, rr.Scalars(float(value)))
-    rec.reset_time()
-
-
 def log_table(rec: rr.RecordingStream, entity: str, title: str, rows: Sequence[Mapping]) -> None:
     """A Markdown table (a list of dicts with the same keys) as a static text document."""
     if rows:

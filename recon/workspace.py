@@ -60,6 +60,7 @@ def package_versions() -> dict[str, str]:
 
 STEP_VERSIONS: dict[str, int] = {
     "track": 2,  # poses in the rig's upright frame (pose.json's world_from_upright)
+    "fit": 2,  # fit.json is a pose file (frames, world_from_upright) that --init-pose reads
 }
 """The version of each step's code (unlisted steps: 1). Bump a step's number when its outputs
 change for the same settings (a new format or method): its results in existing workspaces are
@@ -76,6 +77,16 @@ def fingerprint(*parts: Any) -> str:
     """Stable short hash of JSON-serialisable parts (configs and upstream fingerprints)."""
     text = json.dumps(parts, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def file_digest(path: Path | str) -> str:
+    """Short hash of a file's content (16 hex digits of its SHA-256, as :func:`fingerprint`),
+    for fingerprints of steps that read it. Read in 1 MiB chunks: inputs may be videos."""
+    digest = hashlib.sha256()
+    with Path(path).open("rb") as handle:
+        while chunk := handle.read(1 << 20):
+            digest.update(chunk)
+    return digest.hexdigest()[:16]
 
 
 def partial_path(target: Path) -> Path:
@@ -203,11 +214,30 @@ class Workspace:
         """`mocap track` output: joints.csv, pose.json, motion.bvh."""
         return self.root / "tracks"
 
+    @property
+    def kind(self) -> str | None:
+        """Which pipeline applies: ``"video"`` with cameras.json (`mocap init-video`, `mocap
+        synth`), else ``"photo"`` with images/ (`mocap init`), else None (not a workspace)."""
+        if self.cameras_path.is_file():
+            return "video"
+        if self.images_dir.is_dir():
+            return "photo"
+        return None
+
+    def kind_mismatch(self, kind: str) -> str | None:
+        """Why this is not a ``kind`` workspace, or None when it is one, or is no workspace at
+        all (a step on it then fails with the workspace's own message)."""
+        mine = self.kind
+        if mine is None or mine == kind:
+            return None
+        sign = "it has cameras.json" if mine == "video" else "no cameras.json"
+        return f"not a {kind} workspace ({sign})"
+
     @classmethod
     def open_video(cls, root: Path | str) -> Workspace:
         """An existing video workspace; a one-line error when the folder is not one."""
         ws = cls(root)
-        if not ws.cameras_path.is_file():
+        if ws.kind != "video":
             raise UserError(
                 f"{ws.root} is not a video workspace (no cameras.json); create one with: "
                 f"mocap init-video {ws.root} --videos DIR --calibration FILE, or mocap synth"

@@ -11,14 +11,54 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED_DATA = ROOT.parent / "shared" / "data"
+SHARED_DATA_ENV = "MOCAP_SHARED_DATA"
+"""Environment variable that moves the real data from ``../shared/data`` (beside the project)."""
+SHARED_DATA_MARK = "shared_data"
 
+# Set by tests/conftest.py while pytest runs a test (its setup, call and teardown) and while
+# it sets up a fixture: whom a call of `shared_dataset` is for.
+_session: list[pytest.Session] = []
+_running: list[pytest.Item] = []
+_fixtures: list[pytest.FixtureDef[object]] = []
+shared_fixtures: set[tuple[str, str]] = set()
+"""(baseid, name) of every fixture that has called `shared_dataset`, for conftest's check of
+the tests that reuse its cached value."""
+
+
+def shared_data_root() -> Path:
+    """The folder of the real data sets: ``$MOCAP_SHARED_DATA``, else ``../shared/data``."""
+    override = os.environ.get(SHARED_DATA_ENV)
+    return Path(override) if override else ROOT.parent / "shared" / "data"
+
+
+def in_ci() -> bool:
+    """Whether the environment says this is CI (``CI`` set, as CI services and .ci/run do),
+    where missing real data is an error rather than a reason to skip."""
+    return os.environ.get("CI", "").strip().lower() not in ("", "0", "false", "no")
 
 
 def shared_dataset(name: str) -> Path:
-    """Path of a folder of ../shared/data, or skip the test with the reason."""
-    path = SHARED_DATA / name
+    """Path of a folder of the real data (``shared_data_root() / name``), the one way tests reach
+    it: call it in the test or one of its fixtures, and mark the test
+    ``@pytest.mark.shared_data`` (a test that calls it unmarked fails, see tests/conftest.py).
+    A missing folder skips the test with the reason; with ``CI`` set it fails it."""
+    if _session:
+        # (The innermost session's test: a test may run pytest in-process, as pytester does.)
+        if not _running or _running[-1].session is not _session[-1]:
+            raise RuntimeError(
+                f"shared_dataset({name!r}) called outside a test (at import?): call it in the "
+                f"test or a fixture, and mark the test @pytest.mark.{SHARED_DATA_MARK}")
+        item = _running[-1]
+        if item.get_closest_marker(SHARED_DATA_MARK) is None:
+            pytest.fail(f"{item.nodeid} reads real data ({name}) without "
+                        f"@pytest.mark.{SHARED_DATA_MARK}", pytrace=False)
+        shared_fixtures.update((f.baseid, f.argname) for f in _fixtures)
+    path = shared_data_root() / name
     if not path.is_dir():
+        if in_ci():
+            pytest.fail(f"real data {path} is absent but CI is set: CI must have it "
+                        f"(../shared/data beside the project, or ${SHARED_DATA_ENV})",
+                        pytrace=False)
         pytest.skip(f"real data {path} is absent (it sits beside the project in CI)")
     return path
 
@@ -39,6 +79,23 @@ def run_cli(
         timeout=900,
         env=env,
     )
+
+
+def fake_entry_points(monkeypatch: pytest.MonkeyPatch, group: str, **targets: str) -> None:
+    """Pretend a third-party distribution declared these entry points (``name="module:attr"``)
+    in ``group``, beside the installed ones; for this process only (not for `run_cli`)."""
+    from importlib.metadata import EntryPoint
+
+    from plugins import registry
+
+    fakes = [EntryPoint(name, value, group) for name, value in targets.items()]
+    real = registry.entry_points
+
+    def entry_points(*, group: str):
+        found = list(real(group=group))
+        return [*found, *(f for f in fakes if f.group == group)]
+
+    monkeypatch.setattr(registry, "entry_points", entry_points)
 
 
 def recording_entities(path: Path) -> set[str]:

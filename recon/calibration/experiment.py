@@ -49,9 +49,9 @@ The F estimators (measured: σ = 1 px, tilted scene, 2000 trials for each of see
 ----------------------------------------------------------------------------------------------
 - ``8-point``: Hartley-normalised 8-point on all points (OpenCV ``FM_8POINT``): 4.6%,
   +0.3…+0.5%, 0.67…0.87%. 0.2 ms per trial.
-- ``lmeds-refit``: the pipeline's :func:`~recon.calibration.kruppa_initialiser.refit_fundamental`
-  (LMedS, then 8-point on its inliers): 5.1…5.2%, +0.4…+0.65%, 0.70…0.85%; 4.5 ms. Without
-  outliers LMedS only discards good points.
+- ``lmeds-refit``: :func:`~recon.sfm.fundamental.refit_fundamental`, the Kruppa
+  initialiser's ``fundamental=refit`` (LMedS, then 8-point on its inliers): 5.1…5.2%,
+  +0.4…+0.65%, 0.70…0.85%; 4.5 ms. Without outliers LMedS only discards good points.
 - ``sampson`` (default): 8-point, then the rank-2 F minimising the Sampson distances in pixels
   (first-order maximum likelihood for isotropic pixel noise): 3.7%, +0.2…+0.3%, 0.48…0.55%;
   2.6 ms. A full gold-standard fit (F and the 240 points on the reprojection error, sparse
@@ -74,11 +74,10 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
 from recon.calibration.kruppa import KruppaConfig, PairStatus, focal_from_fundamental
-from recon.calibration.kruppa_initialiser import refit_fundamental
+from recon.sfm.fundamental import eight_point, refine_sampson, refit_fundamental
 from recon.workspace import atomic_output, write_json_atomic
 
 __all__ = [
@@ -96,9 +95,7 @@ __all__ = [
     "build_scene",
     "compute_kruppa_noise",
     "estimate_fundamental",
-    "refine_fundamental_sampson",
     "run_kruppa_noise",
-    "sampson_distances_px",
     "simulate_level",
     "summarise_level",
     "write_kruppa_noise",
@@ -315,87 +312,19 @@ def build_scene(configuration: SceneConfiguration, config: KruppaNoiseConfig) ->
     )
 
 
-def _hartley_normalisation(points_px: np.ndarray) -> np.ndarray:
-    """Similarity moving the centroid to 0 and the mean distance to √2 (Hartley 1997)."""
-    centroid = points_px.mean(axis=0)
-    mean_distance = float(np.linalg.norm(points_px - centroid, axis=1).mean())
-    s = math.sqrt(2.0) / mean_distance if mean_distance > 0 else 1.0
-    return np.array([[s, 0.0, -s * centroid[0]], [0.0, s, -s * centroid[1]], [0.0, 0.0, 1.0]])
-
-
-def _homogeneous(points: np.ndarray) -> np.ndarray:
-    return np.column_stack([points, np.ones(len(points))])
-
-
-def sampson_distances_px(
-    F: np.ndarray, points1_px: np.ndarray, points2_px: np.ndarray
-) -> np.ndarray:
-    """Signed Sampson distance (px) of each correspondence to ``x2ᵀ F x1 = 0``; shape (N,).
-
-    First-order distance of the 4-D point (x1, x2) to the epipolar variety: for isotropic pixel
-    noise its sum of squares is the first-order maximum-likelihood cost.
-    """
-    h1, h2 = _homogeneous(points1_px), _homogeneous(points2_px)
-    lines2 = h1 @ F.T  # epipolar lines in image 2, F x1
-    lines1 = h2 @ F  # epipolar lines in image 1, Fᵀ x2
-    algebraic = np.einsum("ij,ij->i", h2, lines2)
-    gradient = np.sqrt(lines2[:, 0] ** 2 + lines2[:, 1] ** 2 + lines1[:, 0] ** 2
-                       + lines1[:, 1] ** 2)
-    return algebraic / gradient
-
-
-def refine_fundamental_sampson(
-    points1_px: np.ndarray, points2_px: np.ndarray, F_initial: np.ndarray
-) -> np.ndarray:
-    """The rank-2 F (unit norm, ``x2ᵀ F x1 = 0``) minimising the Sampson distances in pixels.
-
-    Parametrised as ``F = T2ᵀ U diag(1, s, 0) Vᵀ T1`` (Bartoli-Sturm orthonormal form: 7
-    parameters, rank 2 by construction) in Hartley-normalised coordinates for conditioning;
-    ``U``, ``V`` are updated by rotation vectors. Levenberg-Marquardt is monotone, so the cost
-    never exceeds that of ``F_initial``'s rank-2 projection.
-    """
-    # Imported here: scipy costs ~0.3 s, and `mocap --help` needs none of it.
-    from scipy.optimize import least_squares
-    from scipy.spatial.transform import Rotation
-
-    T1, T2 = _hartley_normalisation(points1_px), _hartley_normalisation(points2_px)
-    F_normalised = np.linalg.inv(T2).T @ F_initial @ np.linalg.inv(T1)
-    U, sv, Vt = np.linalg.svd(F_normalised)
-    # F is defined up to sign, so flipping U or V to proper rotations changes nothing.
-    U = U if np.linalg.det(U) > 0 else -U
-    V = Vt.T if np.linalg.det(Vt) > 0 else -Vt.T
-
-    def fundamental_normalised(params: np.ndarray) -> np.ndarray:
-        Ur = U @ Rotation.from_rotvec(params[:3]).as_matrix()
-        Vr = V @ Rotation.from_rotvec(params[3:6]).as_matrix()
-        return (Ur * np.array([1.0, params[6], 0.0])) @ Vr.T
-
-    def residuals_px(params: np.ndarray) -> np.ndarray:
-        # Distances of the pixel-space F: the noise is isotropic in pixels, not in the
-        # per-image normalised coordinates (each image has its own scale).
-        F = T2.T @ fundamental_normalised(params) @ T1
-        return sampson_distances_px(F, points1_px, points2_px)
-
-    start = np.concatenate([np.zeros(6), [sv[1] / sv[0]]])
-    solution = least_squares(residuals_px, start, method="lm")
-    F = T2.T @ fundamental_normalised(solution.x) @ T1
-    return F / np.linalg.norm(F)
-
-
 def estimate_fundamental(
     points1_px: np.ndarray, points2_px: np.ndarray, estimator: FundamentalEstimator
 ) -> np.ndarray | None:
-    """F (``x2ᵀ F x1 = 0``, unit norm) from (N, 2) pixel correspondences, or None."""
-    p1 = np.ascontiguousarray(points1_px, dtype=np.float64)
-    p2 = np.ascontiguousarray(points2_px, dtype=np.float64)
+    """F (``x2ᵀ F x1 = 0``, unit norm, rank 2) from (N, 2) pixel correspondences, or None.
+
+    Every estimator is one of :mod:`recon.sfm.fundamental`'s.
+    """
     if estimator is FundamentalEstimator.LMEDS_REFIT:
-        return refit_fundamental(p1, p2)
-    F, _ = cv2.findFundamentalMat(p1, p2, cv2.FM_8POINT)
-    if F is None or F.shape != (3, 3):
-        return None
-    if estimator is FundamentalEstimator.SAMPSON:
-        return refine_fundamental_sampson(p1, p2, F)
-    return F / np.linalg.norm(F)
+        return refit_fundamental(points1_px, points2_px)
+    F = eight_point(points1_px, points2_px)
+    if F is not None and estimator is FundamentalEstimator.SAMPSON:
+        return refine_sampson(F, points1_px, points2_px)
+    return F
 
 
 @dataclass(frozen=True)

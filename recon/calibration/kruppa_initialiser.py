@@ -16,9 +16,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
-import pycolmap
 
 from plugins.protocols import FocalPrior, IntrinsicsContext, IntrinsicsResult, Plugin
 from recon.calibration.fusion import (
@@ -30,6 +28,7 @@ from recon.calibration.fusion import (
     fuse_pair_focals,
 )
 from recon.calibration.kruppa import KruppaConfig, PairFocal, focal_from_fundamental
+from recon.sfm.fundamental import refit_fundamental
 
 
 class FundamentalSource(enum.StrEnum):
@@ -66,6 +65,9 @@ def read_pair_geometries(
 
     ``with_points`` also loads the inlier correspondences, for refitting F.
     """
+    # Imported here: `mocap plugins` imports this module only to describe the plugin.
+    import pycolmap
+
     with pycolmap.Database.open(database_path) as db:
         images = {im.image_id: im for im in db.read_all_images()}
         pair_ids, geometries = db.read_two_view_geometries()
@@ -253,31 +255,9 @@ class KruppaInitialiser(Plugin):
         return fuse(pairs, num_inliers=inliers, image_ids=ids, config=config), table
 
 
-def refit_fundamental(
-    points_i: np.ndarray | None, points_j: np.ndarray | None
-) -> np.ndarray | None:
-    """F with ``x_jᵀ F x_i = 0`` from verified correspondences ((N, 2) px each), or None.
-
-    The thesis' robust step (LMedS) on COLMAP's RANSAC inliers, then the normalised 8-point
-    algorithm on the LMedS inliers: OpenCV's robust estimators return the model of their best
-    minimal sample, noticeably worse than a least-squares refit on all inliers.
-    """
-    if points_i is None or points_j is None or len(points_i) < 15:
-        return None
-    p1 = np.ascontiguousarray(points_i, dtype=np.float64)
-    p2 = np.ascontiguousarray(points_j, dtype=np.float64)
-    F, mask = cv2.findFundamentalMat(p1, p2, cv2.FM_LMEDS)
-    if F is None or F.shape != (3, 3) or mask is None:
-        return None
-    keep = mask.ravel().astype(bool)
-    if keep.sum() >= 8:
-        refit, _ = cv2.findFundamentalMat(p1[keep], p2[keep], cv2.FM_8POINT)
-        if refit is not None and refit.shape == (3, 3):
-            F = refit
-    return F / np.linalg.norm(F)
-
-
 def _principal_points(database_path: Path) -> dict[int, tuple[float, float]]:
+    import pycolmap
+
     with pycolmap.Database.open(database_path) as db:
         return {
             c.camera_id: (float(c.principal_point_x), float(c.principal_point_y))

@@ -13,8 +13,6 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import pycolmap
-
 from plugins.protocols import FocalPrior, IntrinsicsContext, IntrinsicsResult, Plugin
 
 
@@ -58,6 +56,9 @@ def calibrate_view_graph_copy(
     Existing focal priors are cleared on the copy first: COLMAP holds cameras with a prior fixed,
     and an initialiser must not depend on what an earlier one wrote.
     """
+    # Imported here: `mocap plugins` imports this module only to describe the plugin.
+    import pycolmap
+
     with tempfile.TemporaryDirectory(prefix="mocap-view-graph-") as tmp:
         copy = Path(tmp) / "database.db"
         shutil.copy2(database_path, copy)

@@ -2,7 +2,8 @@
 
 Registered in ``pyproject.toml`` under ``mocap.dense`` like any third-party plugin. The heavy
 lifting lives in :mod:`recon.dense.stereo` and :mod:`recon.dense.fusion`; these classes adapt
-them to the plugin Protocol.
+them to the plugin Protocol. pycolmap, like them, is imported where it is used: `mocap plugins`
+imports this module only to describe the backends.
 """
 
 from __future__ import annotations
@@ -15,7 +16,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pycolmap
 
 from plugins.protocols import DenseContext, DenseResult, Plugin
 from recon.errors import UserError
@@ -25,6 +25,7 @@ from recon.progress import bar
 def load_views(undistorted_dir: Path) -> list[Any]:
     """The registered views of an undistorted COLMAP workspace, with their sparse points."""
     import cv2
+    import pycolmap
 
     from recon.dense.stereo import View
 
@@ -143,6 +144,7 @@ class ColmapPatchMatchBackend(Plugin):
 
     def densify(self, context: DenseContext) -> DenseResult:
         import open3d as o3d
+        import pycolmap
 
         if not pycolmap.has_cuda:
             raise UserError(

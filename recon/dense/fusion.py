@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from recon.dense.stereo import DepthMap, View
+from recon.dense.stereo import DepthMap, View, backproject_pixels
 
 if TYPE_CHECKING:
     import open3d
@@ -127,7 +127,7 @@ def _consistent(
     if needed == 0 or len(rows) == 0:
         return np.ones(len(rows), dtype=bool)
     view = views[own.view]
-    points = _backproject_pixels(view, rows, cols, own.depth[rows, cols])
+    points = backproject_pixels(view, rows, cols, own.depth[rows, cols])
     support = np.zeros(len(points), dtype=np.int32)
     pending = np.arange(len(points))
     axis = view.axis_in_world
@@ -180,15 +180,6 @@ def filter_consistent(
     return kept
 
 
-def _backproject_pixels(
-    view: View, rows: np.ndarray, cols: np.ndarray, z: np.ndarray
-) -> np.ndarray:
-    """(N, 3) points_in_world at depths (N,) ``z`` through pixel centres (rows, cols)."""
-    pixels = np.stack([cols + 0.5, rows + 0.5, np.ones(len(rows))])  # COLMAP centres
-    rays_in_world = (view.cam_from_world[:, :3].T @ np.linalg.inv(view.K) @ pixels).T
-    return rays_in_world * z[:, None].astype(np.float64) + view.center_in_world
-
-
 # Points sampled per depth map to measure the scene's extent for the automatic voxel size.
 _EXTENT_SAMPLES = 20000
 
@@ -209,7 +200,7 @@ def _auto_voxel_size(
         rows, cols = rows[pick], cols[pick]
         keep = _consistent(d, rows, cols, by_view, views, config)
         rows, cols = rows[keep], cols[keep]
-        samples.append(_backproject_pixels(views[d.view], rows, cols, d.depth[rows, cols]))
+        samples.append(backproject_pixels(views[d.view], rows, cols, d.depth[rows, cols]))
     points = np.concatenate(samples) if samples else np.zeros((0, 3))
     if len(points) == 0:
         return None
@@ -271,7 +262,7 @@ def fuse(
         if len(rows) == 0:
             continue
         rows_full, cols_full = rows * stride, cols * stride
-        points = _backproject_pixels(
+        points = backproject_pixels(
             view, rows_full, cols_full, total[rows, cols] / count[rows, cols]
         )
         towards = view.center_in_world - points

@@ -48,9 +48,7 @@ __all__ = [
     "SgbmMode",
     "StereoConfig",
     "View",
-    "backproject",
-    "compute_depth_maps",
-    "depth_from_pair",
+    "backproject_pixels",
     "depths_from_pair",
     "select_pairs",
 ]
@@ -731,44 +729,15 @@ def depths_from_pair(
     return DepthMap(ref_index, src_index, depth_ref), DepthMap(src_index, ref_index, depth_src)
 
 
-def depth_from_pair(
-    ref: View, src: View, config: StereoConfig, *, ref_index: int, src_index: int
-) -> DepthMap:
-    """Depth map of ``ref`` from stereo with ``src``; see :func:`depths_from_pair`.
-
-    Computing both views' maps costs almost nothing more: prefer :func:`depths_from_pair`
-    (or :func:`compute_depth_maps`) when both are wanted.
-    """
-    return depths_from_pair(ref, src, config, ref_index=ref_index, src_index=src_index)[0]
-
-
-def compute_depth_maps(
-    views: Sequence[View], pairs: Sequence[tuple[int, int]], config: StereoConfig
-) -> list[DepthMap]:
-    """Both depth maps of every pair (from :func:`select_pairs`), in pair order."""
-    maps: list[DepthMap] = []
-    for i, j in pairs:
-        maps.extend(depths_from_pair(views[i], views[j], config, ref_index=i, src_index=j))
-    return maps
-
-
 # ---------------------------------------------------------------------------------------------
 # Back-projection
 
 
-def backproject(depth: DepthMap, view: View) -> tuple[np.ndarray, np.ndarray]:
-    """Points of a depth map and their colours: ((N, 3) points_in_world, (N, 3) uint8 RGB).
-
-    Each point takes the colour of the pixel it was measured at (thesis §5.3.5: colour by
-    back-projection into the point's own image), in row-major pixel order.
-    """
-    valid = np.isfinite(depth.depth)
-    rows, cols = np.nonzero(valid)
-    z = depth.depth[rows, cols].astype(np.float64)
-    # COLMAP pixel centres are at +0.5.
-    pixels = np.stack([cols + 0.5, rows + 0.5, np.ones_like(z)])
-    points_in_cam = (np.linalg.inv(view.K) @ pixels) * z
-    R, t = view.cam_from_world[:, :3], view.cam_from_world[:, 3]
-    points_in_world = (R.T @ (points_in_cam - t[:, None])).T
-    colours = view.image_bgr[rows, cols][:, ::-1].copy()
-    return points_in_world, colours
+def backproject_pixels(
+    view: View, rows: np.ndarray, cols: np.ndarray, z: np.ndarray
+) -> np.ndarray:
+    """(N, 3) points_in_world at depths (N,) ``z`` (along the view's axis) through the centres
+    of pixels (rows, cols) of ``view``."""
+    pixels = np.stack([cols + 0.5, rows + 0.5, np.ones(len(rows))])  # COLMAP centres
+    rays_in_world = (view.cam_from_world[:, :3].T @ np.linalg.inv(view.K) @ pixels).T
+    return rays_in_world * z[:, None].astype(np.float64) + view.center_in_world

@@ -217,7 +217,7 @@ class RenderView:
 @dataclass(frozen=True)
 class Rendering:
     """A picture of a mesh and the camera that took it (the conventions of
-    recon.evaluation.truth)."""
+    recon.cameras)."""
 
     image_rgb: np.ndarray  # (H, W, 3) uint8
     hit: np.ndarray  # (H, W) bool, pixels whose ray hit the mesh

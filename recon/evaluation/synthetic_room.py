@@ -14,7 +14,7 @@ functions, and the texture is resampled with ``cv2.warpPerspective``. Images are
 ``supersample`` times the resolution and reduced with ``cv2.INTER_AREA`` (anti-aliasing);
 depth is rendered directly at the final resolution, exact at each pixel centre.
 
-Conventions (the same as COLMAP and OpenCV; see also :mod:`recon.evaluation.truth`):
+Conventions (the same as COLMAP and OpenCV; see also :mod:`recon.cameras`):
 
 * World: metres, z up, floor at z = 0, room centred on the z axis.
 * Camera axes RDF: x right, y down, z forward. ``cam_from_world`` is 3x4 ``[R | t]`` with
@@ -38,7 +38,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from recon.evaluation.truth import CameraTruth, write_truth
+from recon.cameras import Camera, look_at, write_cameras_json
 
 # Room extent in metres: x in [-3.5, 3.5], y in [-3, 3], z in [0, 2.8].
 ROOM_MIN = np.array([-3.5, -3.0, 0.0])
@@ -128,17 +128,13 @@ class SyntheticScene:
     K: np.ndarray  # (3, 3) shared by all views
     views: list[SyntheticView]
 
-    def truth(self) -> dict[str, CameraTruth]:
-        """Ground-truth cameras keyed by image name."""
-        return {
-            v.name: CameraTruth(
-                width=self.config.width,
-                height=self.config.height,
-                K=self.K.copy(),
-                cam_from_world=v.cam_from_world.copy(),
-            )
+    def truth(self) -> list[Camera]:
+        """Ground-truth cameras, named by their images, in view order."""
+        return [
+            Camera(v.name, self.config.width, self.config.height, self.K.copy(),
+                   v.cam_from_world.copy())
             for v in self.views
-        }
+        ]
 
 
 @dataclass(frozen=True)
@@ -341,26 +337,6 @@ def make_texture(
 # Cameras
 
 
-def look_at(
-    center_in_world: np.ndarray, target_in_world: np.ndarray, roll_deg: float
-) -> np.ndarray:
-    """(3, 4) ``cam_from_world`` of a camera at ``center`` aimed at ``target``, z up, rolled.
-
-    A positive ``roll_deg`` turns the camera clockwise about its optical axis (seen from
-    behind it), so the picture's content turns counter-clockwise.
-    """
-    forward = target_in_world - center_in_world
-    forward = forward / np.linalg.norm(forward)
-    right = np.cross(forward, np.array([0.0, 0.0, 1.0]))
-    right /= np.linalg.norm(right)
-    down = np.cross(forward, right)
-    R = np.stack([right, down, forward])  # rows: camera axes in world coordinates
-    c, s = math.cos(math.radians(roll_deg)), math.sin(math.radians(roll_deg))
-    roll = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-    R = roll @ R
-    return np.column_stack([R, -R @ center_in_world])
-
-
 def camera_poses(config: SyntheticSceneConfig) -> list[np.ndarray]:
     """(3, 4) ``cam_from_world`` of each view, on an arc around the boxes (seeded)."""
     rng = np.random.default_rng(np.random.SeedSequence([config.seed, 0]))
@@ -382,7 +358,7 @@ def camera_poses(config: SyntheticSceneConfig) -> list[np.ndarray]:
             rng.uniform(-_LOOK_AT_JITTER_Z_M, _LOOK_AT_JITTER_Z_M),
         ]
         roll = rng.uniform(-_MAX_ROLL_DEG, _MAX_ROLL_DEG)
-        poses.append(look_at(center, target, roll))
+        poses.append(look_at(center, target, (0.0, 0.0, 1.0), roll))
     return poses
 
 
@@ -573,7 +549,7 @@ def write_scene(scene: SyntheticScene, images_dir: Path, truth_path: Path) -> No
         if not ok:
             raise OSError(f"could not encode {view.name} as PNG")
         _write_bytes_atomic(images_dir / view.name, encoded.tobytes())
-    write_truth(Path(truth_path), scene.truth())
+    write_cameras_json(Path(truth_path), scene.truth())
 
 
 def visible_surface_points(scene: SyntheticScene, *, step: int = 2, min_views: int = 2,

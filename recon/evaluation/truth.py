@@ -1,170 +1,23 @@
-"""Ground-truth cameras: the project's JSON format, readers for two public data sets, and
+"""Ground-truth cameras: readers for two public data sets and any supported ground truth, and
 pure-numpy comparison of estimated cameras with the truth.
 
-Conventions (the same as COLMAP and OpenCV):
+The cameras are :class:`recon.cameras.Camera` (their conventions: RDF camera axes,
+``cam_from_world = [R | t]``, pixel centres at +0.5), named by their image; our own ground
+truth is ``mocap-cameras-v1`` JSON (:func:`recon.cameras.read_cameras_json`).
 
-* Camera axes are RDF: x right, y down, z forward (along the optical axis).
-* ``cam_from_world`` is a 3x4 matrix ``[R | t]`` with ``x_cam = R @ x_world + t``; the camera
-  centre in the world is ``C = -R.T @ t``.
-* ``K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]]`` maps camera coordinates to pixels whose origin
-  is the top-left corner of the top-left pixel, so that pixel (i, j) has its centre at
-  (i + 0.5, j + 0.5). A perfect centred camera has ``cx = width / 2``, ``cy = height / 2``.
-
-Ground-truth JSON (``mocap-cameras-v1``), one entry per image, keyed by the image's name as
-COLMAP knows it (its path relative to the image folder)::
-
-    {
-      "format": "mocap-cameras-v1",
-      "cameras": {
-        "view_000.png": {
-          "width": 640, "height": 480,
-          "K": [[600.0, 0.0, 320.0], [0.0, 600.0, 240.0], [0.0, 0.0, 1.0]],
-          "cam_from_world": [[r11, r12, r13, t1], [r21, r22, r23, t2], [r31, r32, r33, t3]]
-        }
-      }
-    }
-
-Reading functions do I/O; everything from :func:`umeyama_sim3` on is pure.
+Reading functions do I/O; everything from :func:`camera_center` on is pure.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-TRUTH_FORMAT = "mocap-cameras-v1"
-
-
-@dataclass(frozen=True)
-class CameraTruth:
-    """One known pinhole camera (no distortion)."""
-
-    width: int
-    height: int
-    K: np.ndarray  # (3, 3) float64 intrinsics, pixel centres at +0.5
-    cam_from_world: np.ndarray  # (3, 4) float64 [R | t], x_cam = R x_world + t
-
-    @property
-    def center_in_world(self) -> np.ndarray:
-        """(3,) camera centre in world coordinates."""
-        return camera_center(self.cam_from_world)
-
-    @property
-    def focal_px(self) -> float:
-        """Mean of fx and fy, in pixels."""
-        return float(0.5 * (self.K[0, 0] + self.K[1, 1]))
-
-
-# ---------------------------------------------------------------------------------------------
-# The project's JSON ground truth
-
-
-def _camera_to_json(camera: CameraTruth) -> dict[str, Any]:
-    K = np.asarray(camera.K, dtype=np.float64)
-    cam_from_world = np.asarray(camera.cam_from_world, dtype=np.float64)
-    if K.shape != (3, 3) or cam_from_world.shape != (3, 4):
-        raise ValueError(
-            f"camera K must be 3x3 and cam_from_world 3x4, got {K.shape} and {cam_from_world.shape}"
-        )
-    if not (np.isfinite(K).all() and np.isfinite(cam_from_world).all()):
-        raise ValueError("camera K and cam_from_world must be finite")
-    return {
-        "width": int(camera.width),
-        "height": int(camera.height),
-        "K": K.tolist(),
-        "cam_from_world": cam_from_world.tolist(),
-    }
-
-
-def write_truth(path: Path, cameras: Mapping[str, CameraTruth]) -> None:
-    """Write ground-truth cameras as ``mocap-cameras-v1`` JSON, atomically.
-
-    The file is written to a temporary sibling and renamed over ``path``, so a reader never
-    sees a half-written file. Python's float repr round-trips, so values are read back exactly.
-    """
-    document = {
-        "format": TRUTH_FORMAT,
-        "cameras": {name: _camera_to_json(cam) for name, cam in sorted(cameras.items())},
-    }
-    text = json.dumps(document, indent=1) + "\n"
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp_name, path)
-    except BaseException:
-        Path(tmp_name).unlink(missing_ok=True)
-        raise
-
-
-def _matrix(value: Any, shape: tuple[int, int], what: str) -> np.ndarray:
-    try:
-        array = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{what} is not a numeric matrix") from None
-    if array.shape != shape:
-        raise ValueError(f"{what} has shape {array.shape}, expected {shape}")
-    if not np.isfinite(array).all():
-        raise ValueError(f"{what} has non-finite values")
-    return array
-
-
-def _positive_int(value: Any, what: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
-        raise ValueError(f"{what} must be a positive integer, got {value!r}")
-    return value
-
-
-def parse_truth(document: Any) -> dict[str, CameraTruth]:
-    """Cameras from an already-parsed ``mocap-cameras-v1`` document; ValueError if malformed."""
-    if not isinstance(document, dict):
-        raise ValueError("top level is not a JSON object")
-    if document.get("format") != TRUTH_FORMAT:
-        raise ValueError(f"format is {document.get('format')!r}, expected {TRUTH_FORMAT!r}")
-    entries = document.get("cameras")
-    if not isinstance(entries, dict):
-        raise ValueError('"cameras" is missing or not an object')
-    cameras: dict[str, CameraTruth] = {}
-    for name, entry in entries.items():
-        if not isinstance(entry, dict):
-            raise ValueError(f"camera {name!r} is not an object")
-        missing = {"width", "height", "K", "cam_from_world"} - entry.keys()
-        if missing:
-            raise ValueError(f"camera {name!r} lacks {', '.join(sorted(missing))}")
-        cameras[name] = CameraTruth(
-            width=_positive_int(entry["width"], f"camera {name!r} width"),
-            height=_positive_int(entry["height"], f"camera {name!r} height"),
-            K=_matrix(entry["K"], (3, 3), f"camera {name!r} K"),
-            cam_from_world=_matrix(
-                entry["cam_from_world"], (3, 4), f"camera {name!r} cam_from_world"
-            ),
-        )
-    return cameras
-
-
-def read_truth(path: Path) -> dict[str, CameraTruth]:
-    """Read a ``mocap-cameras-v1`` file; ValueError naming the file if its content is malformed.
-
-    A missing or unreadable file raises the usual OSError.
-    """
-    text = Path(path).read_text(encoding="utf-8")
-    try:
-        return parse_truth(json.loads(text))
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not valid JSON ({exc})") from None
-    except ValueError as exc:
-        raise ValueError(f"{path}: {exc}") from None
-
+from recon.cameras import Camera, read_cameras_json
 
 # ---------------------------------------------------------------------------------------------
 # Public data sets
@@ -172,7 +25,7 @@ def read_truth(path: Path) -> dict[str, CameraTruth]:
 
 def read_middlebury_par(
     path: Path, *, width: int = 640, height: int = 480
-) -> dict[str, CameraTruth]:
+) -> dict[str, Camera]:
     """Cameras of a Middlebury multi-view ``*_par.txt`` file (e.g. ``templeSR_par.txt``).
 
     First line: the number of images; then one line per image,
@@ -189,7 +42,7 @@ def read_middlebury_par(
         raise ValueError(f"{path}: first line should be the number of images") from None
     if len(lines) - 1 != count:
         raise ValueError(f"{path}: header says {count} images but {len(lines) - 1} lines follow")
-    cameras: dict[str, CameraTruth] = {}
+    cameras: dict[str, Camera] = {}
     for number, fields in enumerate(lines[1:], start=2):
         if len(fields) != 22:
             raise ValueError(f"{path}:{number}: expected a name and 21 numbers")
@@ -200,18 +53,20 @@ def read_middlebury_par(
         K = values[0:9].reshape(3, 3)
         R = values[9:18].reshape(3, 3)
         t = values[18:21]
-        cameras[fields[0]] = CameraTruth(
-            width=width, height=height, K=K, cam_from_world=np.column_stack([R, t])
-        )
+        try:
+            cameras[fields[0]] = Camera(fields[0], width, height, K, np.column_stack([R, t]))
+        except ValueError as exc:
+            raise ValueError(f"{path}:{number}: {exc}") from None
     return cameras
 
 
-def read_strecha_camera(path: Path) -> CameraTruth:
+def read_strecha_camera(path: Path) -> Camera:
     """One Strecha et al. (2008) ``*.camera`` file.
 
     Rows: 3 of K, 1 of distortion (zero for the published, undistorted images), 3 of R, 1 of
     the camera centre C, 1 of ``width height``; ``P = K [R^T | -R^T C]``, so R here is
-    world_from_cam and ``cam_from_world = [R^T | -R^T C]``.
+    world_from_cam and ``cam_from_world = [R^T | -R^T C]``. The camera is named by the file
+    name without ``.camera`` (``0000.jpg.camera`` → ``0000.jpg``).
     """
     rows = [line.split() for line in Path(path).read_text().splitlines() if line.strip()]
     try:
@@ -226,15 +81,14 @@ def read_strecha_camera(path: Path) -> CameraTruth:
     world_from_cam_rotation = np.array(numbers[4:7], dtype=np.float64)
     center = np.array(numbers[7], dtype=np.float64)
     R = world_from_cam_rotation.T
-    return CameraTruth(
-        width=int(numbers[8][0]),
-        height=int(numbers[8][1]),
-        K=K,
-        cam_from_world=np.column_stack([R, -R @ center]),
-    )
+    try:
+        return Camera(Path(path).name.removesuffix(".camera"), int(numbers[8][0]),
+                      int(numbers[8][1]), K, np.column_stack([R, -R @ center]))
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
 
 
-def read_strecha_cameras(folder: Path) -> dict[str, CameraTruth]:
+def read_strecha_cameras(folder: Path) -> dict[str, Camera]:
     """All ``*.camera`` files of a folder (e.g. ``fountain_p11/gt_dense_cameras``).
 
     The image name is the file name without ``.camera`` (``0000.jpg.camera`` → ``0000.jpg``).
@@ -242,7 +96,8 @@ def read_strecha_cameras(folder: Path) -> dict[str, CameraTruth]:
     paths = sorted(Path(folder).glob("*.camera"))
     if not paths:
         raise ValueError(f"{folder}: no *.camera files")
-    return {p.name.removesuffix(".camera"): read_strecha_camera(p) for p in paths}
+    cameras = (read_strecha_camera(p) for p in paths)
+    return {camera.name: camera for camera in cameras}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -383,7 +238,7 @@ def focal_error(estimated_px: float, true_px: float) -> float:
 class GroundTruth:
     focal_px: float
     """Mean of fx and fy over the cameras, in pixels."""
-    cameras: dict[str, CameraTruth] | None
+    cameras: dict[str, Camera] | None
     """Per-image cameras when the source has poses (not for a bare K.txt)."""
     source: str
 
@@ -408,7 +263,7 @@ def load_ground_truth(path: Path) -> GroundTruth:
     ValueError with a one-line message naming the path when it is none of these.
     """
     path = Path(path)
-    cameras: dict[str, CameraTruth]
+    cameras: dict[str, Camera]
     if path.is_dir() and any(path.glob("*.camera")):
         cameras, kind = read_strecha_cameras(path), "Strecha cameras"
     elif path.is_dir() and any((path / f"cameras.{ext}").exists() for ext in ("bin", "txt")):
@@ -416,18 +271,20 @@ def load_ground_truth(path: Path) -> GroundTruth:
 
         model = pycolmap.Reconstruction(path)
         cameras = {
-            im.name: CameraTruth(
-                width=model.cameras[im.camera_id].width,
-                height=model.cameras[im.camera_id].height,
-                K=model.cameras[im.camera_id].calibration_matrix(),
-                cam_from_world=im.cam_from_world().matrix(),
+            # K and the pose of any camera model; its distortion is left out (truth is pinhole).
+            im.name: Camera(
+                im.name,
+                model.cameras[im.camera_id].width,
+                model.cameras[im.camera_id].height,
+                model.cameras[im.camera_id].calibration_matrix(),
+                im.cam_from_world().matrix(),
             )
             for im in model.images.values()
             if im.has_pose
         }
         kind = "COLMAP model"
     elif path.is_file() and path.suffix == ".json":
-        cameras, kind = read_truth(path), "mocap-cameras-v1"
+        cameras, kind = {c.name: c for c in read_cameras_json(path)}, "mocap-cameras-v1"
     elif path.is_file() and path.name.endswith("_par.txt"):
         cameras, kind = read_middlebury_par(path), "Middlebury par"
     elif path.is_file() and path.suffix == ".txt":

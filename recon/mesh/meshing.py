@@ -57,6 +57,7 @@ import pymeshlab
 from scipy.spatial import cKDTree
 
 from recon.errors import UserError
+from recon.mesh.normals import vertex_normals
 from recon.workspace import partial_path
 
 MIN_POINTS = 100
@@ -386,8 +387,7 @@ def _unit_vertex_normals(mesh: o3d.geometry.TriangleMesh) -> np.ndarray:
     if mesh.has_vertex_normals():
         normals = np.asarray(mesh.vertex_normals, dtype=np.float64)
     else:
-        with_normals = o3d.geometry.TriangleMesh(mesh).compute_vertex_normals()
-        normals = np.asarray(with_normals.vertex_normals)
+        normals = vertex_normals(np.asarray(mesh.vertices), np.asarray(mesh.triangles))
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     # glTF requires unit normals; an isolated vertex has none, so give it any unit vector.
     ok = (length[:, 0] > 1e-12) & np.isfinite(length[:, 0])

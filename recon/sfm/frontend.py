@@ -28,7 +28,8 @@ What differs from the thesis, and why
 - LMedS breaks down when more than half of the matches lie on one plane, and plain RANSAC
   stops early on a plane plus two points, so each model is kept only if it has the most
   inliers, next to a USAC_ACCURATE model (OpenCV's DEGENSAC-style plane-and-parallax check).
-  The winner is refined by minimising the Sampson distances of its inliers (``refine``).
+  The winner is refined by minimising the Sampson distances of its inliers (``refine``,
+  :func:`recon.sfm.fundamental.refine_sampson`).
 - A pair whose matches a homography explains (a planar scene or a pure rotation) is reported
   as ``"planar-or-panoramic"`` without ``F``: there the matches do not determine ``F``, and a
   Kruppa focal from it would be arbitrary.
@@ -58,12 +59,11 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import cdist
-from scipy.spatial.transform import Rotation
 
 from recon.errors import UserError
+from recon.sfm.fundamental import normalise_fundamental, refine_sampson, sampson_distance_px
 
 # A window whose grey levels vary less than this (standard deviation, 8-bit units) has no
 # usable correlation: its NCC with anything is dominated by noise and quantisation.
@@ -419,80 +419,6 @@ def match_ncc(
     return _match_windows(w1, w2, config)
 
 
-def _signed_sampson_px(F: np.ndarray, points1_px: np.ndarray, points2_px: np.ndarray) -> np.ndarray:
-    """(N,) ``x2ᵀ F x1`` divided by its gradient norm w.r.t. the four coordinates (px)."""
-    x1 = np.column_stack([points1_px, np.ones(len(points1_px))])
-    x2 = np.column_stack([points2_px, np.ones(len(points2_px))])
-    lines2 = x1 @ F.T  # epipolar lines in image 2, F x1
-    lines1 = x2 @ F  # epipolar lines in image 1, Fᵀ x2
-    algebraic = np.einsum("ij,ij->i", x2, lines2)
-    gradient = np.hypot(np.hypot(lines2[:, 0], lines2[:, 1]), np.hypot(lines1[:, 0], lines1[:, 1]))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        # A point on both epipoles has no defined distance; count it as infinitely far.
-        return np.where(gradient > 0, algebraic / gradient, np.inf)
-
-
-def sampson_distance_px(
-    F: np.ndarray, points1_px: np.ndarray, points2_px: np.ndarray
-) -> np.ndarray:
-    """(N,) Sampson distances of matches under ``F``: the first-order geometric error (px).
-
-    ``F`` is (3, 3) with ``x2ᵀ F x1 = 0``; points are ``(N, 2)`` px in ``F``'s convention.
-    """
-    p1 = np.asarray(points1_px, np.float64).reshape(-1, 2)
-    p2 = np.asarray(points2_px, np.float64).reshape(-1, 2)
-    return np.abs(_signed_sampson_px(np.asarray(F, np.float64), p1, p2))
-
-
-def _normalised_F(F: np.ndarray) -> np.ndarray:
-    """Rank-2 ``F`` with unit Frobenius norm and its largest-magnitude entry positive."""
-    U, s, Vt = np.linalg.svd(F)
-    F = U @ np.diag([s[0], s[1], 0.0]) @ Vt
-    F = F / np.linalg.norm(F)
-    flat = F.ravel()
-    return F if flat[np.argmax(np.abs(flat))] > 0 else -F
-
-
-def _hartley_transform(points_px: np.ndarray) -> np.ndarray:
-    """(3, 3) similarity moving the points' centroid to 0 and their mean distance to √2."""
-    centroid = points_px.mean(axis=0)
-    spread = np.linalg.norm(points_px - centroid, axis=1).mean()
-    s = math.sqrt(2.0) / spread if spread > 0 else 1.0
-    return np.array([[s, 0.0, -s * centroid[0]], [0.0, s, -s * centroid[1]], [0.0, 0.0, 1.0]])
-
-
-def _refine_sampson(F: np.ndarray, points1_px: np.ndarray, points2_px: np.ndarray) -> np.ndarray:
-    """``F`` minimising the squared Sampson distances of the given (inlier) matches.
-
-    Uses Bartoli and Sturm's orthonormal representation ``F = U diag(1, σ, 0) Vᵀ`` (7 degrees
-    of freedom, rank 2 by construction) of ``F`` in Hartley-normalised coordinates, which keeps
-    the problem well conditioned whatever the image size.
-    """
-    T1 = _hartley_transform(points1_px)
-    T2 = _hartley_transform(points2_px)
-    F_norm = np.linalg.inv(T2).T @ F @ np.linalg.inv(T1)
-    U, s, Vt = np.linalg.svd(F_norm)
-    # Orthogonal -> rotation: flipping the null vectors' sign leaves U diag(.., 0) Vᵀ unchanged.
-    U[:, 2] *= np.sign(np.linalg.det(U))
-    V = Vt.T
-    V[:, 2] *= np.sign(np.linalg.det(V))
-
-    def model(params: np.ndarray) -> np.ndarray:
-        U_p = U @ Rotation.from_rotvec(params[0:3]).as_matrix()
-        V_p = V @ Rotation.from_rotvec(params[3:6]).as_matrix()
-        F_n = U_p @ np.diag([1.0, params[6], 0.0]) @ V_p.T
-        return T2.T @ F_n @ T1
-
-    def residuals(params: np.ndarray) -> np.ndarray:
-        return _signed_sampson_px(model(params), points1_px, points2_px)
-
-    start = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, s[1] / s[0]])
-    # Plain least squares: the matches are inliers already. A robust loss was measured to
-    # change nothing: the wrong matches that survive lie along their epipolar lines.
-    solution = least_squares(residuals, start, method="lm", x_scale="jac")
-    return model(solution.x)
-
-
 def estimate_fundamental(
     points1_px: np.ndarray, points2_px: np.ndarray, config: HarrisNccConfig
 ) -> tuple[np.ndarray | None, np.ndarray]:
@@ -524,7 +450,7 @@ def estimate_fundamental(
         return None, no_inliers
     if not np.isfinite(F_ransac).all() or np.linalg.norm(F_ransac) == 0:
         return None, no_inliers
-    F = _normalised_F(F_ransac)
+    F = normalise_fundamental(F_ransac)
     inliers = sampson_distance_px(F, p1, p2) < config.ransac_threshold_px
     # The thesis then optimises the RANSAC consensus with LMedS. LMedS returns a 7-point model
     # of its own and breaks down when over half of the points lie on one plane (a plane plus
@@ -542,7 +468,7 @@ def estimate_fundamental(
             config.ransac_max_iters,
         )
         if F_lmeds is not None and F_lmeds.shape == (3, 3) and np.isfinite(F_lmeds).all():
-            F_lmeds = _normalised_F(F_lmeds)
+            F_lmeds = normalise_fundamental(F_lmeds)
             lmeds_inliers = sampson_distance_px(F_lmeds, p1, p2) < config.ransac_threshold_px
             if lmeds_inliers.sum() >= inliers.sum():
                 F, inliers = F_lmeds, lmeds_inliers
@@ -559,7 +485,7 @@ def estimate_fundamental(
             config.ransac_max_iters,
         )
         if F_usac is not None and F_usac.shape == (3, 3) and np.isfinite(F_usac).all():
-            F_usac = _normalised_F(F_usac)
+            F_usac = normalise_fundamental(F_usac)
             usac_inliers = sampson_distance_px(F_usac, p1, p2) < config.ransac_threshold_px
             if usac_inliers.sum() > inliers.sum():
                 F, inliers = F_usac, usac_inliers
@@ -568,7 +494,7 @@ def estimate_fundamental(
         for _ in range(2):
             if inliers.sum() < 8:
                 break
-            F_refined = _normalised_F(_refine_sampson(F, p1[inliers], p2[inliers]))
+            F_refined = refine_sampson(F, p1[inliers], p2[inliers])
             refined_inliers = sampson_distance_px(F_refined, p1, p2) < config.ransac_threshold_px
             if refined_inliers.sum() < inliers.sum():
                 break

@@ -1,7 +1,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from importlib.metadata import EntryPoint
 
 import pytest
 
@@ -9,6 +8,7 @@ import plugins
 from plugins import registry
 from plugins.options import OptionsError, parse_options
 from plugins.protocols import FocalPrior, IntrinsicsContext, IntrinsicsResult
+from tests.helpers import fake_entry_points
 
 
 class GoodInitialiser:
@@ -38,15 +38,19 @@ class NoMethod:
         pass
 
 
+class HalfCommand:
+    """A command whose `help` is not a string and which has no `run`."""
+
+    help = None
+    description = "half a command"
+
+    def add_arguments(self, parser):
+        pass
+
+
 def _with_entry_points(monkeypatch: pytest.MonkeyPatch, **targets: str) -> None:
     """Pretend a third-party distribution declared these `mocap.intrinsics` entry points."""
-    fakes = [EntryPoint(name, value, "mocap.intrinsics") for name, value in targets.items()]
-    real = registry.entry_points
-
-    def entry_points(*, group: str):
-        return [*real(group=group), *fakes] if group == "mocap.intrinsics" else real(group=group)
-
-    monkeypatch.setattr(registry, "entry_points", entry_points)
+    fake_entry_points(monkeypatch, "mocap.intrinsics", **targets)
 
 
 def test_builtins_are_registered_through_entry_points():
@@ -109,3 +113,39 @@ def test_options_reject_unknown_keys():
         parse_options(Opts, ["b=1"])
     with pytest.raises(OptionsError, match="not key=value"):
         parse_options(Opts, ["a"])
+
+
+def test_commands_and_batch_steps_are_plugins_without_options():
+    commands = {"init", "sfm", "dense", "mesh", "run", "batch", "compare", "experiment", "view",
+                "plugins", "body", "track", "fit", "report", "synth", "init-video",
+                "silhouettes", "demo"}
+    assert commands <= set(plugins.available("command"))
+    assert {"sfm", "dense", "mesh", "silhouettes", "track"} <= set(plugins.available("step"))
+    command = plugins.create("command", "sfm")
+    assert isinstance(command, plugins.Command) and command.help
+    step = plugins.create("step", "dense")
+    assert isinstance(step, plugins.BatchStep)
+    assert (step.workspace, step.follows) == ("photo", "sfm")
+    with pytest.raises(plugins.PluginError, match="takes no options"):
+        plugins.create("command", "plugins", ["x=1"])
+    listed = {(i.kind, i.name): i for i in plugins.list_plugins()}
+    assert listed["command", "init"].description == "make a workspace from a folder of photos"
+    assert listed["step", "track"].options == ()
+
+
+def test_a_command_that_does_not_satisfy_the_protocol_names_what_it_lacks(monkeypatch):
+    fake_entry_points(monkeypatch, "mocap.commands", half=f"{__name__}:HalfCommand")
+    with pytest.raises(plugins.PluginError, match=r"does not satisfy Command: it has no `help` "
+                       r"string, has no `run` method"):
+        registry.load("command", "half")
+    loaded, broken = registry.load_all("command")
+    assert "half" in broken and "sfm" in loaded
+
+
+def test_a_name_declared_twice_breaks_only_that_name(monkeypatch):
+    _with_entry_points(monkeypatch, fixed=f"{__name__}:GoodInitialiser")
+    with pytest.raises(plugins.PluginError, match="'fixed' is declared twice"):
+        registry.load("intrinsics", "fixed")
+    assert registry.load("intrinsics", "exif").description
+    listed = {i.name: i.description for i in plugins.list_plugins(("intrinsics",))}
+    assert listed["fixed"].startswith("BROKEN") and not listed["exif"].startswith("BROKEN")

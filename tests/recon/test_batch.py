@@ -5,7 +5,8 @@ process, one after the other, and once as Dask tasks on two worker processes, wi
 "workspace" that is not one. The Dask run must give the very same files: COLMAP runs on one
 thread with a fixed seed (its multi-threaded RANSAC varies run to run), and the mesher is ball
 pivoting, because Open3D's Poisson solver sums in thread order and its vertices vary in the
-last digits from run to run even serially.
+last digits from run to run even serially. The video workspaces' steps, tracking's, are tested
+in tests/tracking/test_batch_steps.py; third-party steps here, through faked entry points.
 """
 
 from __future__ import annotations
@@ -14,18 +15,19 @@ import json
 import time
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pycolmap
 import pytest
 
+from plugins.protocols import BaseBatchStep, StepResult
+from plugins.registry import PluginError
 from recon.batch import (
     BatchConfig,
     BatchReport,
-    BatchStep,
     StepStatus,
     map_ordered,
     parse_steps,
+    registered_steps,
     run_batch,
     run_workspace,
 )
@@ -35,14 +37,12 @@ from recon.evaluation.synthetic_room import SyntheticSceneConfig, render_scene, 
 from recon.mesh.step import MeshConfig
 from recon.sfm.pipeline import SfMConfig, cams_from_world
 from recon.workspace import Workspace
-from tests.helpers import run_cli, shared_dataset
-from tracking.rig.synth import SynthConfig, synthesize
-from tracking.silhouettes.step import SilhouettesConfig
-from tracking.track.tracker import TrackConfig
+from tests.helpers import fake_entry_points, run_cli
 
 SFM = SfMConfig(num_threads=1, seed=0, max_image_size=320, max_num_features=2000)
 DENSE = DenseConfig(dense_max_image_size=320, num_threads=1)
 MESH = MeshConfig(mesher="ball-pivoting")
+SETTINGS = {"sfm": SFM, "dense": DENSE, "mesh": MESH}
 SETTINGS_FLAGS = ("--num-threads", "1", "--max-image-size", "320", "--max-num-features", "2000",
                   "--dense-max-image-size", "320", "--mesher", "ball-pivoting")
 SEEDS = (1, 2)
@@ -70,14 +70,13 @@ def runs(tmp_path_factory, cluster):
         write_scene(scene, root / f"photos{seed}", root / f"truth{seed}.json")
         for kind in ("serial", "dask"):
             Workspace.create(root / f"{kind}{seed}", root / f"photos{seed}")
-    serial = [run_workspace(root / f"serial{seed}", sfm=SFM, dense=DENSE, mesh=MESH)
-              for seed in SEEDS]
+    serial = [run_workspace(root / f"serial{seed}", settings=SETTINGS) for seed in SEEDS]
     (root / "not-a-workspace").mkdir()
     lines: list[str] = []
     with Client(cluster) as client, get_task_stream(client) as stream:
         report = run_batch(
             [root / "dask1", root / "not-a-workspace", root / "dask2"],
-            BatchConfig(scheduler=cluster.scheduler_address), SFM, DENSE, MESH, echo=lines.append,
+            BatchConfig(scheduler=cluster.scheduler_address), SETTINGS, echo=lines.append,
         )
     return root, serial, report, lines, stream.data
 
@@ -163,8 +162,7 @@ def test_map_ordered_keeps_input_order_on_a_cluster(cluster):
 
 
 def test_steps_and_bad_input():
-    assert parse_steps("mesh, sfm") == (BatchStep.SFM, BatchStep.MESH)
-    assert parse_steps("track,silhouettes") == (BatchStep.SILHOUETTES, BatchStep.TRACK)
+    assert parse_steps("mesh, sfm") == ("sfm", "mesh")
     assert parse_steps(None) is None
     with pytest.raises(UserError, match="choose from sfm, dense, mesh, silhouettes, track"):
         parse_steps("sfm,fly")
@@ -174,107 +172,76 @@ def test_steps_and_bad_input():
     assert result.returncode == 2
     assert result.stderr.strip() == (
         "mocap batch: error: --steps 'sfm,fly': choose from sfm, dense, mesh, silhouettes, "
-        "track (comma-separated)")
+        "track, report (comma-separated)")
     result = run_cli("batch", "ws", "--scheduler", "/nonexistent/scheduler.json")
     assert result.returncode == 2
     assert result.stderr.strip().endswith("no such scheduler file")
 
 
 def test_serial_run_skips_the_steps_after_a_failure(tmp_path):
-    result = run_workspace(tmp_path / "nothing", (BatchStep.DENSE, BatchStep.MESH))
-    assert [s.step for s in result.steps] == [BatchStep.DENSE, BatchStep.MESH]
+    result = run_workspace(tmp_path / "nothing", ("mesh", "dense"))
+    assert [s.step for s in result.steps] == ["dense", "mesh"]
     assert [s.status for s in result.steps] == [StepStatus.FAILED, StepStatus.SKIPPED]
     assert isinstance(BatchReport((result,), 0.0).lines()[0], str)
 
 
-# Video workspaces ---------------------------------------------------------------------------
-TRACK = TrackConfig(init_simplex_evals=40)  # small budgets: ~10 s a sequence
+# Steps as plugins --------------------------------------------------------------------------
+class EchoStep(BaseBatchStep):
+    """A third-party step after the photo pipeline's last: its settings back as its summary."""
+
+    description = "says its settings"
+    workspace = "photo"
+    follows = "mesh"
+
+    def settings(self, args):
+        return "default words"
+
+    def run(self, workspace, settings, *, overwrite):
+        return StepResult(summary={"said": settings})
+
+    def figure(self, summary):
+        return f"[{summary['said']}]"
 
 
-@pytest.mark.slow
-def test_tracking_sequences_on_dask_equal_a_serial_run(cluster, tmp_path):
-    """Two synthetic sequences as parallel Dask chains (one tracking task each) against serial
-    runs: the same tracks. Their silhouettes are given, so that step is skipped, not failed."""
-    from distributed import Client, get_task_stream
+class NoRun:
+    description = "broken: no run method"
+    workspace = "photo"
+    follows = None
 
-    walk = shared_dataset("mocap_bvh") / "cmu_02_01_walk.bvh"
-    for fov in (50, 55):  # two sequences, as from two camera set-ups
-        for kind in ("serial", "dask"):
-            synthesize(tmp_path / f"{kind}{fov}", SynthConfig(
-                bvh=walk, frames=3, cameras=3, size="160x120", fov_deg=fov, clean=True))
-    serial = [run_workspace(tmp_path / f"serial{fov}", track=TRACK) for fov in (50, 55)]
-    with Client(cluster) as client, get_task_stream(client) as stream:
-        report = run_batch([tmp_path / "dask50", tmp_path / "dask55"],
-                           BatchConfig(scheduler=cluster.scheduler_address), track=TRACK)
-    for result in (*serial, *report.results):
-        assert result.ok, result.line()
-        assert [(s.step, s.status, s.reason) for s in result.steps] == [
-            (BatchStep.SILHOUETTES, StepStatus.SKIPPED, "silhouettes given (synthetic)"),
-            (BatchStep.TRACK, StepStatus.DONE, None)]
-        assert "silhouettes skipped (silhouettes given (synthetic))" in result.line()
-    for fov in (50, 55):
-        a, b = (tmp_path / f"{kind}{fov}" / "tracks" for kind in ("serial", "dask"))
-        pose_a, pose_b = (json.loads((t / "pose.json").read_text()) for t in (a, b))
-        assert len(pose_a["frames"]) == 3 and pose_a["frames"][0]["params"] is not None
-        assert [f["params"] for f in pose_a["frames"]] == [f["params"] for f in pose_b["frames"]]
-        assert pose_a == pose_b
-        assert (a / "joints.csv").read_bytes() == (b / "joints.csv").read_bytes()
-    track_tasks = [t for t in stream.data if str(t["key"]).startswith("mocap-track-")]
-    assert len(track_tasks) == 2  # one sequential task per sequence
-    # Photo steps do not apply to a video workspace: skipped with the reason, nothing fails.
-    skipped = run_workspace(tmp_path / "serial50", (BatchStep.SFM, BatchStep.TRACK), track=TRACK)
-    assert skipped.ok and [s.status for s in skipped.steps] == [StepStatus.SKIPPED,
-                                                                StepStatus.REUSED]
+
+def test_a_registered_step_extends_its_kind_pipeline(monkeypatch, tmp_path):
+    fake_entry_points(monkeypatch, "mocap.steps", echo=f"{__name__}:EchoStep")
+    steps = registered_steps()
+    assert steps.of_kind("photo") == ("sfm", "dense", "mesh", "echo")
+    assert parse_steps("echo,sfm", steps) == ("sfm", "echo")
+    photo = tmp_path / "photo"
+    (photo / "images").mkdir(parents=True)
+    result = run_workspace(photo, ("echo",), {"echo": "hello"})
+    assert [(s.step, s.status, s.summary) for s in result.steps] == [
+        ("echo", StepStatus.DONE, {"said": "hello"})]
+    assert "echo" in result.line() and "[hello]" in result.line()
+    assert run_workspace(photo, ("echo",)).steps[0].summary == {"said": "default words"}
+    # Not its kind: skipped with the reason, nothing fails.
+    video = tmp_path / "video"
+    video.mkdir()
+    (video / "cameras.json").write_text("{}")
+    skipped = run_workspace(video, ("echo",))
+    assert skipped.ok and skipped.steps[0].status is StepStatus.SKIPPED
     assert skipped.steps[0].reason == "not a photo workspace (it has cameras.json)"
+    with pytest.raises(UserError, match="settings of unknown batch step"):
+        run_workspace(photo, ("echo",), {"ecco": "typo"})
 
 
-def test_silhouettes_per_camera_and_frames_on_dask_equal_a_serial_run(cluster, tmp_path):
-    """A real-video workspace: a task per camera's background model, then a task per run of
-    frames of each camera, then a task per run of frames for the multi-view check, give the
-    very masks (PNG bytes) and summary of the serial step."""
-    from distributed import Client, get_task_stream
-
-    from tests.tracking.rig.test_video import make_ball_scene
-    from tracking.rig.video import init_video
-    from tracking.silhouettes.step import frame_chunks
-
-    cameras, frames = 3, 30
-    videos, calibration, photos, _ = make_ball_scene(tmp_path / "scene", cameras=cameras,
-                                                     frames=frames)
-    for kind in ("serial", "dask"):
-        init_video(tmp_path / kind, videos, calibration)
-    settings = SilhouettesConfig(background_images=photos)
-    serial = run_workspace(tmp_path / "serial", (BatchStep.SILHOUETTES,), silhouettes=settings)
-    with Client(cluster) as client, get_task_stream(client) as stream:
-        report = run_batch([tmp_path / "dask"], BatchConfig(
-            scheduler=cluster.scheduler_address, steps=(BatchStep.SILHOUETTES,)),
-            silhouettes=settings)
-    for result in (serial, report.results[0]):
-        assert [(s.step, s.status) for s in result.steps] == [
-            (BatchStep.SILHOUETTES, StepStatus.DONE)], result.line()
-    # The runs' results were merged in frame order, as the serial loop lists them; a light
-    # flashing in cam00's video alone is removed by the multi-view check.
-    summary = serial.steps[0].summary
-    assert summary["cameras"]["cam00"]["hull_removed"]["max"] > 0.1
-    assert summary == report.results[0].steps[0].summary
-
-    keys = [str(t["key"]) for t in stream.data]
-    assert sum(k.startswith("camera_background-") for k in keys) == cameras
-    runs = frame_chunks(list(range(frames)))
-    assert [len(r) for r in runs] == [10, 10, 10]
-    # Each run of each camera ran as a task: more tasks than cameras classified frames.
-    assert sum(k.startswith("frame_silhouettes-") for k in keys) == cameras * len(runs) > cameras
-    assert sum(k.startswith("frames_consistency-") for k in keys) == len(runs)
-    assert not any(k.startswith("camera_silhouettes") for k in keys)
-
-    a, b = (Workspace(tmp_path / kind).silhouettes_dir for kind in ("serial", "dask"))
-    names = sorted(p.relative_to(a) for p in a.rglob("*.png"))
-    assert len(names) == cameras * frames + 1  # and cam00/unknown.png (its photo's block)
-    assert names == sorted(p.relative_to(b) for p in b.rglob("*.png"))
-    assert all(cv2.imread(str(a / n), cv2.IMREAD_GRAYSCALE).any() for n in names)
-    for name in names:
-        assert (a / name).read_bytes() == (b / name).read_bytes(), name
-    assert not list(tmp_path.glob("dask/silhouettes*partial*"))
+def test_a_broken_step_is_set_aside_and_named_when_asked_for(monkeypatch):
+    fake_entry_points(monkeypatch, "mocap.steps", norun=f"{__name__}:NoRun",
+                      gone="no_such_module_xyz:Step")
+    steps = registered_steps()
+    assert set(steps.broken) == {"norun", "gone"}
+    assert steps.names == ("sfm", "dense", "mesh", "silhouettes", "track", "report")
+    with pytest.raises(PluginError, match="has no `run` method"):
+        parse_steps("sfm,norun", steps)
+    with pytest.raises(PluginError, match="failed to import"):
+        parse_steps("gone", steps)
 
 
 def _slow_add(item: int, offset: int) -> int:

@@ -2,11 +2,17 @@
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from PIL import Image
 
-from tests.helpers import run_cli
+from recon.cli import main
+from recon.errors import UserError
+from tests.helpers import ROOT, fake_entry_points, run_cli
 
 
 def _assert_one_line_error(result, *needles: str) -> None:
@@ -131,3 +137,120 @@ def test_colmap_patchmatch_with_cuda(tmp_path):  # pragma: no cover - runs on CU
     result = run_cli("dense", out, "--dense", "colmap-patchmatch")
     assert result.returncode == 0, result.stderr
     assert (out / "dense" / "fused.ply").stat().st_size > 10_000
+
+
+# Commands are plugins --------------------------------------------------------------------------
+class HelloCommand:
+    """A third-party command, declared through a (faked) entry point."""
+
+    help = "say hello"
+    description = "Say hello to --name; --fail makes it a one-line error."
+
+    def add_arguments(self, parser):
+        parser.add_argument("--name", default="world")
+        parser.add_argument("--fail", action="store_true")
+
+    def run(self, args):
+        if args.fail:
+            raise UserError(f"{args.name} is not here")
+        print(f"hello {args.name}")
+
+
+class NoRunCommand:
+    help = "cannot run"
+    description = ""
+
+    def add_arguments(self, parser):
+        pass
+
+
+class BadFlagsCommand(HelloCommand):
+    def add_arguments(self, parser):
+        raise RuntimeError("flags\nbroken")
+
+
+def _fake_commands(monkeypatch):
+    fake_entry_points(monkeypatch, "mocap.commands", hello=f"{__name__}:HelloCommand",
+                      norun=f"{__name__}:NoRunCommand", gone="no_such_module_xyz:Gone",
+                      badflags=f"{__name__}:BadFlagsCommand")
+
+
+def test_a_third_party_command_runs_like_ours(monkeypatch, capsys):
+    _fake_commands(monkeypatch)
+    assert main(["hello", "--name", "you"]) == 0
+    assert capsys.readouterr().out == "hello you\n"
+    assert main(["-v", "hello", "--fail"]) == 2
+    assert capsys.readouterr().err == "mocap hello: error: world is not here\n"
+
+
+def test_broken_commands_are_listed_and_fail_in_one_line(monkeypatch, capsys):
+    _fake_commands(monkeypatch)
+    with pytest.raises(SystemExit) as exit_:
+        main(["--help"])
+    assert exit_.value.code == 0
+    listing = capsys.readouterr().out
+    assert "hello        say hello" in listing and "sfm          sparse" in listing
+    for name in ("norun", "gone"):
+        line = next(line for line in listing.splitlines() if line.strip().startswith(name))
+        assert "BROKEN: command plugin" in line, listing
+    for args, needle in ((["gone", "--anything"], "'gone' (no_such_module_xyz:Gone) failed to "
+                          "import"),
+                         (["norun"], "has no `run` method"),
+                         (["badflags"], "cannot build its flags: RuntimeError: flags broken")):
+        assert main(args) == 2
+        captured = capsys.readouterr()
+        assert captured.out == ""
+        assert captured.err.startswith(f"mocap {args[0]}: error: command plugin")
+        assert needle in captured.err and len(captured.err.splitlines()) == 1, captured.err
+    # The others still work, and `mocap plugins` says which are broken.
+    with pytest.raises(SystemExit):
+        main(["sfm", "--help"])
+    assert "--max-num-features" in capsys.readouterr().out
+    assert main(["plugins"]) == 0
+    out = capsys.readouterr().out
+    assert "command (mocap.commands)" in out and "step (mocap.steps)" in out
+    assert "  gone               BROKEN: command plugin 'gone'" in out
+    assert "  hello              say hello" in out
+
+
+_IMPORTED = """
+import json, sys
+from recon.cli import main
+try:
+    main(sys.argv[2:])
+except SystemExit:
+    pass
+with open(sys.argv[1], "w") as out:
+    json.dump(sorted(sys.modules), out)
+"""
+
+HEAVY = ("numba", "open3d", "pymeshlab", "rerun", "distributed", "scipy", "matplotlib")
+"""Libraries that take a large part of a second to import, which listing commands and plugins
+must not load."""
+
+
+def _imported(tmp_path, *args: str) -> set[str]:
+    out = tmp_path / "modules.json"
+    subprocess.run([sys.executable, "-c", _IMPORTED, out, *args], cwd=ROOT, check=True,
+                   capture_output=True)
+    return set(json.loads(out.read_text()))
+
+
+@pytest.mark.parametrize("args", [("--help",), ("plugins",)])
+def test_listing_commands_and_plugins_imports_no_pipeline(args, tmp_path):
+    """`mocap --help` imports the command modules only; `mocap plugins` the plugin modules too,
+    which keep numba, Open3D, pycolmap and the tracker inside their functions."""
+    modules = _imported(tmp_path, *args)
+    loaded = sorted(m for m in modules if m.split(".")[0] in (*HEAVY, "pycolmap"))
+    assert not loaded, loaded
+    tracking = {m for m in modules if m.split(".")[0] == "tracking"}
+    if args == ("--help",):
+        assert "numpy" not in modules
+        assert tracking == {"tracking", "tracking.commands"}
+    else:
+        plugin_modules = {"tracking", "tracking.commands", "tracking.batch_steps",
+                          "tracking.track", "tracking.track.render", "tracking.rig",
+                          "tracking.rig.cameras"}
+        assert tracking <= plugin_modules, sorted(tracking - plugin_modules)
+        assert "tracking.track.render" in tracking  # the renderers were described
+

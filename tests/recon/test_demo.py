@@ -1,4 +1,5 @@
-"""`mocap demo` end to end: the generated scene, reconstructed, scored against its truth."""
+"""`mocap demo`'s photo part end to end (``--no-compare --no-capture``): the generated scene,
+reconstructed, scored against its truth. The rest of the demo: tests/tracking/test_demo.py."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from tests.helpers import recording_entities, run_cli
 
 def test_demo_recovers_the_known_cameras_and_surfaces(tmp_path):
     out = tmp_path / "demo"
-    result = run_cli("demo", "--out", out, "--num-views", "10")
+    result = run_cli("demo", "--out", out, "--num-views", "10", "--no-compare", "--no-capture")
     assert result.returncode == 0, result.stderr
     evaluation = json.loads((out / "evaluation.json").read_text())
     assert evaluation["registered"] == evaluation["images"] == 10
@@ -36,7 +37,7 @@ def test_demo_recovers_the_known_cameras_and_surfaces(tmp_path):
     # Idempotent: a second run renders nothing new and reuses every step.
     steps = json.loads((out / "run.json").read_text())["steps"]
     finished = {k: v["finished"] for k, v in steps.items()}
-    again = run_cli("demo", "--out", out, "--num-views", "10")
+    again = run_cli("demo", "--out", out, "--num-views", "10", "--no-compare", "--no-capture")
     assert again.returncode == 0, again.stderr
     assert again.stdout.count("(reused)") == 4
     steps = json.loads((out / "run.json").read_text())["steps"]

@@ -11,7 +11,7 @@ from PIL import Image
 
 from recon import workspace as workspace_module
 from recon.errors import UserError
-from recon.workspace import Workspace, atomic_output, fingerprint
+from recon.workspace import Workspace, atomic_output, file_digest, fingerprint
 
 
 def _photos(folder: Path, count: int = 3, size: tuple[int, int] = (64, 48)) -> list[Path]:
@@ -125,6 +125,17 @@ def test_atomic_output_keeps_the_old_file_when_the_step_fails(tmp_path):
         tmp.mkdir()
         (tmp / "cameras.bin").write_text("new")
     assert (target / "cameras.bin").read_text() == "new"
+
+
+def test_file_digest_is_the_content_hash_read_in_chunks(tmp_path):
+    # 2.5 MiB: more than one read of the streaming loop.
+    content = np.random.default_rng(0).integers(0, 256, 5 << 19, dtype=np.uint8).tobytes()
+    path = tmp_path / "video.bin"
+    path.write_bytes(content)
+    assert file_digest(path) == hashlib.sha256(content).hexdigest()[:16]
+    assert len(file_digest(path)) == len(fingerprint("x"))
+    path.write_bytes(content[:-1] + bytes([content[-1] ^ 1]))
+    assert file_digest(path) != hashlib.sha256(content).hexdigest()[:16]
 
 
 def test_steps_are_done_only_with_matching_fingerprint_and_outputs(tmp_path):

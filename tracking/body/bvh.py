@@ -56,11 +56,6 @@ class Joint:
             if name not in _AXIS_OF_CHANNEL:
                 raise ValueError(f"joint {self.name!r}: unknown channel {name!r}")
 
-    @property
-    def rotation_order(self) -> str:
-        """Axes of the rotation channels in file order, e.g. "ZYX" ("" when none)."""
-        return "".join(c[0] for c in self.channels if c in ROTATION_CHANNELS)
-
 
 @dataclass(frozen=True, eq=False)
 class Motion:

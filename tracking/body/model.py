@@ -38,6 +38,7 @@ from functools import cached_property
 
 import numpy as np
 
+from recon.mesh.normals import vertex_normals
 from tracking.body.bvh import rotations_to_channels
 
 _DEG = np.pi / 180.0
@@ -631,12 +632,8 @@ class BodyModel:
     @cached_property
     def vertex_normals_in_node(self) -> np.ndarray:
         """(V, 3) unit outward normals of the vertices in their node's frame (read-only)."""
-        v, f = self.vertex_in_node, self.faces
-        face_n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-        normals = np.zeros_like(v)
-        for k in range(3):
-            np.add.at(normals, f[:, k], face_n)
-        normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+        v = self.vertex_in_node
+        normals = vertex_normals(v, self.faces)
         # Outwards: away from the vertex's segment centre (superquadrics are star-shaped).
         centre = np.zeros_like(v)
         for seg in np.unique(self.segment_of_vertex):

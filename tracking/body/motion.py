@@ -14,8 +14,10 @@ lengths back from the OFFSETs and the 24 parameters from the channels. A BVH car
 skeleton but no segment girths, so those are `BodyShape.default`'s for the skeleton's height.
 Any other skeleton (the CMU one) goes through `tracking.body.retarget` instead (`poses_from_bvh`).
 
-`read_pose_file` reads the other file format of pose sequences, ``pose.json`` (`mocap track`'s
-``tracks/pose.json``, `mocap synth`'s ``gt/pose.json``, `mocap track --init-pose`).
+`read_pose_file` reads the other file format of pose sequences, ``pose.json``: `mocap track`'s
+``tracks/pose.json``, `mocap synth`'s ``gt/pose.json`` and `mocap fit`'s ``fit.json`` (a single
+pose, with the fit's own fields alongside) are all in it, and it is what `mocap track
+--init-pose` and `mocap report` read.
 """
 
 from __future__ import annotations
@@ -160,7 +162,8 @@ PoseFrames = list[tuple[int, "np.ndarray | None"]]
 class PoseFile(NamedTuple):
     """A pose file's contents (`read_pose_file`)."""
 
-    frame_rate: float
+    frame_rate: float | None
+    """Frames per second; None for a single pose without timing (`mocap fit`'s fit.json)."""
     shape: BodyShape
     frames: PoseFrames
     world_from_upright: np.ndarray
@@ -179,8 +182,10 @@ def read_pose_file(path: Path | str) -> PoseFile:
 
     The poses are in an upright frame (Y up, gravity along -Y); ``world_from_upright``, a
     rotation about the origin, takes them to the world frame of the cameras (default: the
-    identity, a Y-up world). Other keys are ignored. A one-line `UserError` names what is
-    wrong.
+    identity, a Y-up world). ``frame_rate`` may be missing or null for a single pose
+    (`mocap fit`'s fit.json, posed in its cloud's frame). Other keys are ignored, except that
+    a file saying ``"success": false`` (a body fit that failed) is refused. A one-line
+    `UserError` names what is wrong.
     """
     path = Path(path)
     try:
@@ -189,14 +194,19 @@ def read_pose_file(path: Path | str) -> PoseFile:
         raise UserError(f"cannot read {path}: {exc.strerror}") from None
     except json.JSONDecodeError as exc:
         raise UserError(f"{path} is not valid JSON ({exc})") from None
+    if isinstance(data, dict) and data.get("success") is False:
+        raise UserError(f"{path}: the body fit failed ({data.get('message', 'no message')}); "
+                        "it holds no pose to use")
     try:
-        frame_rate = float(data["frame_rate"])
+        if not isinstance(data, dict):
+            raise TypeError("not a JSON object")
+        frame_rate = None if data.get("frame_rate") is None else float(data["frame_rate"])
         shape = BodyShape(**{k: float(v) for k, v in data["shape"].items()})
         entries = sorted(data["frames"], key=lambda e: int(e["frame"]))
         rotation = np.array(data.get("world_from_upright", np.eye(3)), dtype=float)
     except (KeyError, TypeError, ValueError) as exc:
-        raise UserError(f"{path}: not a pose track ({exc!s}); expected frame_rate, shape and "
-                        "frames") from None
+        raise UserError(f"{path}: not a pose track ({exc!s}); expected shape, frames and (for "
+                        "a motion) frame_rate") from None
     if rotation.shape != (3, 3) or not np.allclose(rotation @ rotation.T, np.eye(3),
                                                    atol=1e-6) or np.linalg.det(rotation) < 0:
         raise UserError(f"{path}: world_from_upright is not a 3x3 rotation")

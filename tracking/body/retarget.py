@@ -152,18 +152,16 @@ def _median_distance(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.median(np.linalg.norm(a - b, axis=-1)))
 
 
-def shape_from_motion(motion: Motion, metres_per_unit: float, frame: int | None = 0) -> BodyShape:
+def shape_from_motion(motion: Motion, metres_per_unit: float) -> BodyShape:
     """The subject's `BodyShape` measured from the BVH skeleton (lengths in metres).
 
     Bone lengths are medians over all frames (rigid bones make them the rest lengths; the
-    median ignores glitches). `frame` is kept for API compatibility: lengths do not depend on it.
-    Left and right are averaged (our model is symmetric). The ankle height is the lowest ankle
-    height over the clip above the lowest toe tip (the floor); the foot length is the ankle to
-    toe-tip distance over 0.8 (our foot mesh puts the toe tip 0.8 foot lengths ahead of the
-    ankle). The hand length (the CMU hand bones end at the finger bases) and all girths are the
-    standard proportions of the resulting height.
+    median ignores glitches). Left and right are averaged (our model is symmetric). The ankle
+    height is the lowest ankle height over the clip above the lowest toe tip (the floor); the
+    foot length is the ankle to toe-tip distance over 0.8 (our foot mesh puts the toe tip 0.8
+    foot lengths ahead of the ankle). The hand length (the CMU hand bones end at the finger
+    bases) and all girths are the standard proportions of the resulting height.
     """
-    del frame
     p = cmu_node_positions(motion, metres_per_unit)
     pos = np.asarray(bvh_forward_kinematics(motion, scale=metres_per_unit))
     names = motion.joint_names

@@ -42,6 +42,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial import cKDTree
 
+from recon.mesh.normals import vertex_normals
 from tracking.body.bvh import rotations_to_channels
 from tracking.body.model import (
     LOWER_LIMITS,
@@ -204,7 +205,7 @@ class _Surface:
         one, two = sample(1.0), sample(2.0)
         self.in_node = np.concatenate([v for v, _, _ in one])
         self.per_girth = np.concatenate([v for v, _, _ in two]) - self.in_node
-        self.normal_in_node = np.concatenate([_vertex_normals(v, f) for v, f, _ in one])
+        self.normal_in_node = np.concatenate([vertex_normals(v, f) for v, f, _ in one])
         self.node = np.concatenate([np.full(len(v), node) for v, _, node in one])
 
     def posed(self, x: np.ndarray, index: np.ndarray | slice = slice(None)):
@@ -218,15 +219,6 @@ class _Surface:
             np.einsum("nij,nj->ni", rot, local) + trans,
             np.einsum("nij,nj->ni", rot, self.normal_in_node[index]),
         )
-
-
-def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    a, b, c = (vertices[faces[:, k]] for k in range(3))
-    face = np.cross(b - a, c - a)
-    acc = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(acc, faces[:, k], face)
-    return acc / np.maximum(np.linalg.norm(acc, axis=1), 1e-300)[:, None]
 
 
 @functools.cache

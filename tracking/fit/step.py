@@ -1,10 +1,19 @@
 """`mocap fit`: the body model fitted to a point cloud file or to a workspace's dense cloud.
 
-Writes ``fit.json`` (success, residuals, height, the 24 pose parameters by name, the shape and
-``joints``: ``{"joint name": [x, y, z], ...}`` in the cloud's frame), ``fit.ply`` (the posed
-body mesh) and a Rerun recording (cloud, body mesh, skeleton as keypoints with connections),
-each atomically. In a workspace these go to ``WS/body/`` and ``WS/logs/fit.rrd``, and the step
-is skipped when neither the cloud nor the settings changed.
+Writes ``fit.json``, ``fit.ply`` (the posed body mesh) and a Rerun recording (cloud, body
+mesh, skeleton as keypoints with connections), each atomically. ``fit.json`` is a pose file
+(`tracking.body.motion.read_pose_file`, the format of ``tracks/pose.json``; what `mocap track
+--init-pose` reads) of one frame without a frame rate, posed in the cloud's frame
+(``world_from_upright`` the identity), with the fit's own fields alongside::
+
+    {"frames": [{"frame": 0, "params": [24 floats in POSE_LAYOUT order]}],
+     "shape": {<every BodyShape field>: metres}, "world_from_upright": identity (3, 3),
+     "success", "message", "residual_median", "inlier_fraction", "height", ... (`FitResult`),
+     "pose": {"<parameter name>": value, ...} (the same pose, by name),
+     "joints": {"<joint name>": [x, y, z], ...} (metres, the cloud's frame)}
+
+In a workspace these go to ``WS/body/`` and ``WS/logs/fit.rrd``, and the step is skipped when
+neither the cloud nor the settings changed.
 """
 
 from __future__ import annotations
@@ -88,9 +97,11 @@ def read_cloud(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
 
 
 def fit_summary(result: FitResult) -> dict[str, Any]:
-    """The content of fit.json."""
+    """The content of fit.json (module docstring): a pose file with the fit's fields."""
     return {
         **result.summary(),
+        "frames": [{"frame": 0, "params": [float(v) for v in result.pose.params]}],
+        "world_from_upright": np.eye(3).tolist(),
         "pose": result.pose.as_dict(),
         "shape": dataclasses.asdict(result.shape),
         "joints": {name: [float(v) for v in xyz] for name, xyz in result.joints.items()},

@@ -2,7 +2,9 @@
 
 Inputs, all turned into one `MotionSequence` of the body model:
 
-* a tracking workspace: ``WS/tracks/pose.json`` (see `read_pose_track` for the format);
+* a tracking workspace: ``WS/tracks/pose.json`` (see `read_pose_track` for the format); a
+  synthetic workspace's ground truth ``WS/gt/pose.json`` only when asked (``--truth``: the
+  report then goes to ``WS/gt/report/``), never in place of a tracked motion;
 * a BVH clip, retargeted onto the body model (`tracking.body.retarget`);
 * any `MotionSequence` built in code (`report_sequence`), e.g. a synthetic one.
 
@@ -24,7 +26,6 @@ from __future__ import annotations
 
 import dataclasses
 import enum
-import hashlib
 import html
 import json
 from collections.abc import Sequence
@@ -39,6 +40,7 @@ from recon.workspace import (
     Timer,
     Workspace,
     atomic_output,
+    file_digest,
     fingerprint,
     write_json_atomic,
 )
@@ -96,6 +98,12 @@ class ReportConfig:
     )
     plot_format: PlotFormat = field(
         default=PlotFormat.PNG, metadata={"help": "format of the plots in the HTML report"}
+    )
+    truth: bool = field(
+        default=False,
+        metadata={"help": "report the ground truth of a synthetic workspace (`mocap synth`: "
+                  "WS/gt/pose.json) instead of its tracked motion, into WS/gt/report/ and "
+                  "WS/logs/report-truth.rrd"},
     )
 
     def __post_init__(self) -> None:
@@ -220,6 +228,9 @@ def read_pose_track(path: Path, max_frames: int | None = None) -> MotionSequence
     from the list are lost frames too.
     """
     frame_rate, shape, entries, _ = read_pose_file(path)
+    if frame_rate is None:
+        raise UserError(f"{path} holds a pose without a frame rate (such as mocap fit's "
+                        "fit.json), not a motion to report")
     first = entries[0][0]
     count = entries[-1][0] - first + 1
     if max_frames is not None:
@@ -229,10 +240,6 @@ def read_pose_track(path: Path, max_frames: int | None = None) -> MotionSequence
         if row is not None and frame - first < count:
             params[frame - first] = row
     return MotionSequence.from_poses(params, shape, frame_rate, first, source=str(path))
-
-
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -245,12 +252,15 @@ def report_from_bvh(
 ) -> ReportSummary:
     """Report of a BVH clip in ``out/report/`` (recording ``out/report/report.rrd``)."""
     bvh, out = Path(bvh), Path(out)
+    if config.truth:
+        raise UserError("--truth reports the ground truth of a synthetic workspace "
+                        "(mocap report WS --truth), not a BVH clip")
     if out.exists() and not out.is_dir():
         raise UserError(f"output path {out} is a file, not a folder")
     if not bvh.is_file():
         raise UserError(f"BVH file {bvh} not found")
     report_dir = out / REPORT_DIR
-    fp = fingerprint("report", config.as_dict(), _sha256(bvh))
+    fp = fingerprint("report", config.as_dict(), file_digest(bvh))
     if not overwrite and (done := _reusable(report_dir, report_dir / "report.rrd", fp)):
         return done
     with Timer() as timer:
@@ -263,28 +273,38 @@ def report_from_bvh(
 def report_from_workspace(
     workspace: Path, config: ReportConfig, *, overwrite: bool = False
 ) -> ReportSummary:
-    """Report of ``WS/tracks/pose.json`` in ``WS/report/`` and ``WS/logs/report.rrd``; a
-    synthetic sequence not tracked yet (`mocap synth`) reports its ``gt/pose.json``."""
+    """Report of ``WS/tracks/pose.json`` in ``WS/report/`` and ``WS/logs/report.rrd``.
+
+    A workspace that has not been tracked is refused, also a synthetic one (`mocap synth`):
+    its ground truth ``gt/pose.json`` is reported only when asked for (``config.truth``), in
+    ``WS/gt/report/`` and ``WS/logs/report-truth.rrd`` (step ``report-truth``), so that no
+    report of the truth can pass for one of the tracked motion."""
     root = Path(workspace)
     if root.exists() and not root.is_dir():
         raise UserError(f"workspace path {root} is a file, not a folder")
-    track = root / POSE_TRACK
-    if not track.is_file() and (root / GT_POSE).is_file():
-        track = root / GT_POSE
-    if not track.is_file():
-        raise UserError(f"{track} not found: track the sequence first (`mocap track {root}`), "
-                        "or report a BVH clip with `mocap report --bvh FILE --out DIR`")
     ws = Workspace(root)
-    fp = fingerprint("report", config.as_dict(), _sha256(track))
-    report_dir = root / REPORT_DIR
-    recording = ws.logs_dir / "report.rrd"
+    if config.truth:
+        track, report_dir, step = root / GT_POSE, ws.gt_dir / REPORT_DIR, "report-truth"
+        if not track.is_file():
+            raise UserError(f"{track} not found: --truth reports the ground truth of a "
+                            "synthetic sequence (made with `mocap synth`)")
+    else:
+        track, report_dir, step = root / POSE_TRACK, root / REPORT_DIR, "report"
+        if not track.is_file():
+            truth = (f"; {root / GT_POSE} is the synthetic ground truth, reported with --truth"
+                     if (root / GT_POSE).is_file() else "")
+            raise UserError(f"{track} not found: track the sequence first (`mocap track "
+                            f"{root}`), or report a BVH clip with `mocap report --bvh FILE "
+                            f"--out DIR`{truth}")
+    fp = fingerprint("report", config.as_dict(), file_digest(track))
+    recording = ws.logs_dir / f"{step}.rrd"
     if not overwrite and (done := _reusable(report_dir, recording, fp)):
         return done
     with Timer() as timer:
         seq = read_pose_track(track, config.max_frames)
-    result = report_sequence(seq, report_dir, config, recording=ws.log_path("report"),
+    result = report_sequence(seq, report_dir, config, recording=ws.log_path(step),
                              step_fingerprint=fp, input_seconds=timer.seconds)
-    ws.record_step("report", fp, config=config.as_dict(), seconds=sum(
+    ws.record_step(step, fp, config=config.as_dict(), seconds=sum(
         result.summary["seconds"].values()), summary={
         k: result.summary[k] for k in ("frames", "frame_rate", "cutoff_hz", "notes")})
     return result

@@ -37,15 +37,20 @@ exact render in this order:
    background).
 
 ``clean`` skips all three: the silhouettes are then exactly the renderer's masks.
+
+``videos`` also writes what the cameras would have filmed, ``WS/render/videos/<camera>.avi``
+(the exact silhouettes painted as a subject over a static textured scene) and a photo of the
+empty scene per camera, ``WS/render/backgrounds/<camera>.png`` (`tracking.rig.synth_video`):
+the inputs of `mocap init-video` and `mocap capture`, with ``WS/cameras.json`` as calibration.
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
-import hashlib
 import math
 import re
+import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -53,11 +58,20 @@ from typing import Any
 import cv2
 import numpy as np
 
+from recon.cameras import Camera, write_cameras_json
 from recon.errors import UserError
-from recon.workspace import Timer, Workspace, atomic_output, fingerprint, write_json_atomic
+from recon.workspace import (
+    Timer,
+    Workspace,
+    atomic_output,
+    file_digest,
+    fingerprint,
+    write_json_atomic,
+)
 from tracking.body.bvh import CMU_METRES_PER_UNIT, Motion, read_bvh
 from tracking.body.model import BONES, NODE_NAMES, BodyModel, BodyShape, Pose, forward_kinematics
-from tracking.rig.cameras import Camera, ring_cameras, write_cameras_json
+from tracking.rig.cameras import ring_cameras
+from tracking.rig.synth_video import RENDER_DIR, VIDEO_SUFFIX, SyntheticVideos
 from tracking.track.render import DEFAULT_RENDERER
 
 STEP = "synth"
@@ -102,6 +116,11 @@ class SynthConfig:
                               "flags": ("--renderer-option",), "metavar": "KEY=VALUE"})
     seed: int = field(default=0, metadata={"help": "seed of the silhouette noise"})
     clean: bool = field(default=False, metadata={"help": "no noise: write the exact renders"})
+    videos: bool = field(
+        default=False, metadata={"help": "also write WS/render/videos/<camera>.avi, the subject "
+                                 "over a static textured scene, and WS/render/backgrounds/"
+                                 "<camera>.png, the empty scene (for mocap init-video or "
+                                 "mocap capture with --calibration WS/cameras.json)"})
     jitter_px: float = field(
         default=0.6, metadata={"help": "boundary jitter: RMS displacement of the outline, px"})
     jitter_scale_px: float = field(
@@ -152,6 +171,9 @@ class SynthSummary:
             f"truth       {root / 'gt' / 'joints.csv'}, {root / 'gt' / 'pose.json'} "
             f"({s['retarget']['method']}, {s['retarget']['mean_residual_mm']:.1f} mm RMS mean)",
             f"silhouettes {root / 'silhouettes'}/<camera>/<frame:06d>.png",
+            *([f"videos      {root / s['videos']['videos']}/<camera>{VIDEO_SUFFIX}, "
+               f"empty scene {root / s['videos']['backgrounds']}/<camera>.png"]
+              if s.get("videos") else []),
             f"recording   {root / 'logs' / 'synth.rrd'}",
         ]
         if self.reused:
@@ -383,10 +405,6 @@ def iou(a: np.ndarray, b: np.ndarray) -> float:
 # The step (disk)
 
 
-def _file_digest(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
-
-
 def _read_motion(path: Path) -> Motion:
     try:
         return read_bvh(path)
@@ -456,10 +474,11 @@ def synthesize(ws_root: Path | str, config: SynthConfig, *,
     config_record = _config_record(config)
     # The clip's content, not its path, identifies the input.
     fp = fingerprint(STEP, {k: v for k, v in config_record.items() if k != "bvh"},
-                     _file_digest(config.bvh))
+                     file_digest(config.bvh))
     recording_path = ws.logs_dir / f"{STEP}.rrd"
+    render_dir = ws.root / RENDER_DIR
     outputs = (ws.cameras_path, ws.silhouettes_dir, ws.gt_dir / "joints.csv",
-               ws.gt_dir / "pose.json", recording_path)
+               ws.gt_dir / "pose.json", recording_path, *([render_dir] if config.videos else []))
     if done := ws.reusable(STEP, fp, *outputs, overwrite=overwrite):
         return SynthSummary(ws.root, done.summary, reused=True)
 
@@ -493,6 +512,9 @@ def synthesize(ws_root: Path | str, config: SynthConfig, *,
             gt_dir = stack.enter_context(atomic_output(ws.gt_dir))
             sil_dir.mkdir()
             gt_dir.mkdir()
+            videos = (stack.enter_context(SyntheticVideos(
+                stack.enter_context(atomic_output(render_dir)), cameras, frame_rate,
+                config.seed)) if config.videos else None)
             log_y_up_world(rec)
             log_silhouette_context(rec, "world/cameras")
             for camera in cameras:
@@ -505,6 +527,8 @@ def synthesize(ws_root: Path | str, config: SynthConfig, *,
                           else None)
                 for v, camera in enumerate(cameras):
                     mask = np.asarray(renderer.render(vertices[k], model.faces, camera), bool)
+                    if videos is not None:
+                        videos.add(v, mask)
                     if not config.clean:
                         depth = float(camera.project(pelvis[k][None])[1][0])
                         rng = np.random.default_rng([config.seed, int(k), v])
@@ -520,6 +544,8 @@ def synthesize(ws_root: Path | str, config: SynthConfig, *,
             log_skeleton_frames(rec, "world/gt", frames, times_s, joints, BONES)
             _write_truth(gt_dir, poses, shape, joints, clip_frames, frame_rate, config)
             write_cameras_json(ws.cameras_path, cameras)
+        if videos is None and render_dir.exists():  # videos of an earlier run's settings
+            shutil.rmtree(render_dir)
 
     noise = {"clean": config.clean, "jitter_px": config.jitter_px, "holes": config.holes,
              "shadow_length_m": config.shadow_length_m if with_shadow else 0.0,
@@ -536,6 +562,7 @@ def synthesize(ws_root: Path | str, config: SynthConfig, *,
         "retarget": {"method": method, "mean_residual_mm": float(residual_m.mean() * 1000),
                      "max_residual_mm": float(residual_m.max() * 1000)},
         "subject_height_m": shape.height,
+        "videos": videos.summary() if videos is not None else None,
         "seconds": {"poses": t_poses.seconds, "silhouettes": t_sil.seconds,
                     "total": total.seconds},
     }

@@ -37,7 +37,6 @@ step summary keeps the region that holds the image.
 
 from __future__ import annotations
 
-import hashlib
 import math
 import os
 import re
@@ -50,10 +49,11 @@ from typing import Any
 import cv2
 import numpy as np
 
+from recon.cameras import Camera, write_cameras_json
 from recon.errors import UserError
 from recon.sfm.images import IMAGE_SUFFIXES
-from recon.workspace import Timer, Workspace, atomic_output, fingerprint
-from tracking.rig.cameras import Camera, read_cameras, write_cameras_json
+from recon.workspace import Timer, Workspace, atomic_output, file_digest, fingerprint
+from tracking.rig.cameras import read_cameras
 
 # FFmpeg prints its own complaints about a broken file to stderr, around our one-line error that
 # names it; quiet unless the user asks (OPENCV_FFMPEG_LOGLEVEL=32). Read when FFmpeg is first
@@ -340,12 +340,12 @@ def _file_identity(path: Path) -> dict[str, Any]:
 
 
 def _calibration_digest(path: Path) -> str:
-    digest = hashlib.sha256()
-    files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
-    for p in files:
-        digest.update(p.name.encode())
-        digest.update(p.read_bytes())
-    return digest.hexdigest()[:16]
+    """Content digest of a calibration file, or of a calibration folder's files (a COLMAP
+    model) with their names."""
+    if not path.is_dir():
+        return file_digest(path)
+    return fingerprint({p.relative_to(path).as_posix(): file_digest(p)
+                        for p in sorted(path.rglob("*")) if p.is_file()})
 
 
 def _remove(path: Path) -> None:

@@ -34,8 +34,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from recon.cameras import Camera
 from recon.errors import UserError
-from tracking.rig.cameras import Camera
 
 Box = tuple[int, int, int, int]
 """(x0, y0, x1, y1), end exclusive: the part of an image that holds the picture."""

@@ -14,9 +14,11 @@ The background model of each camera is either the per-pixel mean and standard de
 frames that show the empty scene (``--background frames:A-B``, the thesis' method; at most
 ``--background-samples`` of them, spread over A-B), or, when no such frames exist (the Pose2Sim
 demo), the temporal median and median absolute deviation of ``--background-samples`` frames
-spread evenly over the whole video (``--background median``):
+spread evenly over the whole video (``--background median``), then again over the frames
+where each pixel is not foreground (``--background-passes``; `BackgroundModel.from_sequence`):
 right wherever the subject covers a pixel in fewer than half of them, so a subject who hardly
-moves becomes background. Each processed frame is then classified
+moves becomes background. `background_sample` and `background_model` are that choice and that
+model, which benchmarks/silhouettes_cdnet.py scores. Each processed frame is then classified
 (`tracking.silhouettes.subtraction`:
 foreground / background / shadow thresholds, morphological clean-up) at full resolution.
 
@@ -36,7 +38,6 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import dataclasses
-import hashlib
 import itertools
 import re
 from collections.abc import Callable, Iterator, Sequence
@@ -47,11 +48,18 @@ from typing import Any
 import cv2
 import numpy as np
 
+from recon.cameras import Camera
 from recon.errors import UserError
 from recon.progress import bar
 from recon.sfm.images import IMAGE_SUFFIXES
-from recon.workspace import StepRecord, Timer, Workspace, atomic_output, fingerprint
-from tracking.rig.cameras import Camera
+from recon.workspace import (
+    StepRecord,
+    Timer,
+    Workspace,
+    atomic_output,
+    file_digest,
+    fingerprint,
+)
 from tracking.rig.video import STEP as INIT_STEP
 from tracking.rig.video import (
     content_box,
@@ -74,7 +82,6 @@ STEP = "silhouettes"
 UNKNOWN_NAME = "unknown.png"
 """``silhouettes/<camera>/unknown.png``: the camera's pixels whose background is unknown (255),
 left out of the tracking energy and of the silhouette IoU; written only when there are any."""
-_MAD_TO_STD = 1.4826  # as BackgroundModel.from_sequence
 _BACKGROUND_FORMAT = re.compile(r"^(median|frames:(\d+)-(\d+))$")
 
 
@@ -154,66 +161,32 @@ class SilhouettesConfig:
         return int(found.group(2)), int(found.group(3))
 
 
-def median_background(frames: list[np.ndarray], thresholds: SilhouetteConfig | None = None,
-                      passes: int = 2) -> BackgroundModel:
-    """The background of a sequence without an empty frame: per pixel, the temporal median of
-    an odd number of (H, W, 3) uint8 frames and the spread (1.4826 MAD) around it.
-
-    A first pass takes every frame (`_middle`: an odd-even transposition sort across frames
-    with element-wise min/max, exactly ``np.median`` in a third of its time). Where the subject
-    stands in many of the frames, that median is partly the subject and its spread is
-    inflated by the subject's motion, so the silhouettes miss what stands still. Each further
-    pass classifies the frames against the model so far (`thresholds`) and takes the median and
-    spread over the frames where the pixel is background, the silhouettes dilated by a margin;
-    a pixel with fewer than a quarter of the frames free keeps its previous value.
-    """
-    if len(frames) % 2 == 0 or any(f.dtype != np.uint8 for f in frames):
-        raise ValueError("median_background needs an odd number of uint8 frames")
-    median = _middle([np.array(f) for f in frames])
-    mad = _middle([cv2.absdiff(f, median) for f in frames])
-    model = BackgroundModel(median.astype(np.float32),
-                            (_MAD_TO_STD * mad.astype(np.float32)).astype(np.float32))
-    thresholds = thresholds or SilhouetteConfig()
-    for _ in range(passes - 1):
-        h, w = frames[0].shape[:2]
-        margin = max(3, round(0.01 * max(h, w)))
-        free = np.stack([cv2.dilate(silhouette_from_frame(f, model, thresholds).astype(np.uint8),
-                                    np.ones((margin, margin), np.uint8)) == 0
-                         for f in frames])  # fmt: skip
-        model = _free_median(frames, free, model)
-    return model
+def background_sample(count: int, config: SilhouettesConfig) -> list[int]:
+    """Indexes (0-based, increasing) of the frames of a `count`-frame video that the background
+    model is built from: with ``--background median`` an odd number, ``background_samples``
+    rounded up, spread evenly over the whole video; with ``frames:A-B`` up to
+    ``background_samples`` spread over A-B (which must lie in the video). They are decoded
+    and held in memory at once."""
+    span = config.background_frames
+    if span is None:
+        return _spread(count, config.background_samples, odd=True)
+    if span[1] > count - 1:
+        raise UserError(f"--background {config.background}: the videos end at frame "
+                        f"{count - 1}")
+    return [span[0] + i for i in
+            _spread(span[1] - span[0] + 1, config.background_samples, odd=False)]
 
 
-def _free_median(frames: list[np.ndarray], free: np.ndarray, previous: BackgroundModel
-                 ) -> BackgroundModel:  # fmt: skip
-    """Per pixel and channel, median and 1.4826 MAD over the frames where `free` (N, H, W);
-    the `previous` model where fewer than a quarter of the frames are free. Row blocks bound
-    the memory (a 16-bit copy of the frames of a block)."""
-    n, h, w = free.shape
-    mean, std = previous.mean.copy(), previous.std.copy()
-    count = free.sum(axis=0)
-    enough = count >= max(1, n // 4)
-    invalid = np.uint16(65535)  # sorts after every 8-bit value
-    rows = max(1, (1 << 24) // (n * w * 3))
-    for r0 in range(0, h, rows):
-        r1 = min(h, r0 + rows)
-        block = np.stack([f[r0:r1] for f in frames]).astype(np.uint16)  # (N, r, W, 3)
-        block[~free[:, r0:r1]] = invalid
-        block.sort(axis=0)
-        k = count[r0:r1]
-        lo = np.maximum((k - 1) // 2, 0)[None, :, :, None]
-        hi = np.maximum(k // 2, 0)[None, :, :, None]
-        lo, hi = (np.broadcast_to(i, (1, *block.shape[1:])) for i in (lo, hi))
-        med = 0.5 * (np.take_along_axis(block, lo, 0)[0].astype(np.float32)
-                     + np.take_along_axis(block, hi, 0)[0].astype(np.float32))
-        dev = np.abs(block.astype(np.float32) - med[None])
-        dev[block == invalid] = np.inf
-        dev.sort(axis=0)
-        mad = 0.5 * (np.take_along_axis(dev, lo, 0)[0] + np.take_along_axis(dev, hi, 0)[0])
-        ok = enough[r0:r1]
-        mean[r0:r1][ok] = med[ok]
-        std[r0:r1][ok] = _MAD_TO_STD * mad[ok]
-    return BackgroundModel(mean, std)
+def background_model(frames: list[np.ndarray], config: SilhouettesConfig) -> BackgroundModel:
+    """The background model of one camera from its `background_sample` frames, each (H, W, 3)
+    uint8: their mean and standard deviation for ``frames:A-B`` (empty scene), else the temporal
+    median and spread (`BackgroundModel.from_sequence` with ``background_passes`` passes and
+    the step's classification ``thresholds``). Background photos are added to the latter
+    apart (`with_background_photo`). The CDnet benchmark scores this very function."""
+    if config.background_frames is not None:
+        return BackgroundModel.from_frames(frames)
+    return BackgroundModel.from_sequence(frames, config.thresholds,
+                                         passes=config.background_passes)
 
 
 _MIN_PHOTO_AGREEMENT = 0.3
@@ -359,17 +332,6 @@ def read_background_image(path: Path, camera: Camera) -> np.ndarray:
     return cv2.warpAffine(image, warp, (camera.width, camera.height), flags=cv2.INTER_LINEAR)
 
 
-def _middle(arrays: list[np.ndarray]) -> np.ndarray:
-    """Element-wise median of an odd number of equal-shape arrays (sorts them in place)."""
-    n = len(arrays)
-    for rnd in range(n):
-        for j in range(rnd % 2, n - 1, 2):
-            low = np.minimum(arrays[j], arrays[j + 1])
-            np.maximum(arrays[j], arrays[j + 1], out=arrays[j + 1])
-            arrays[j] = low
-    return arrays[n // 2]
-
-
 def _spread(count: int, samples: int, *, odd: bool) -> list[int]:
     """Up to ``samples`` frame indexes spread evenly over 0..count-1; with ``odd`` an odd
     number of them (``samples`` rounded up, ``count`` down), as the median needs."""
@@ -435,24 +397,18 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
                         f"frame {n_frames - 1} of the videos")
     frames = list(range(config.first, last + 1, config.frame_step))
     span = config.background_frames
+    background_frames = background_sample(n_frames, config)
     if span is not None:
-        if span[1] > n_frames - 1:
-            raise UserError(f"--background {config.background}: the videos end at frame "
-                            f"{n_frames - 1}")
-        # At most background_samples of them, spread evenly: they are held in memory at once.
-        background_frames = [span[0] + i for i in
-                             _spread(span[1] - span[0] + 1, config.background_samples, odd=False)]
         background_text = (f"mean and spread of {len(background_frames)} empty-scene frames "
                            f"in {span[0]}-{span[1]}")
     else:
-        background_frames = _spread(n_frames, config.background_samples, odd=True)
         background_text = (f"temporal median of {len(background_frames)} frames spread over "
                            f"0-{n_frames - 1}")
     photos = (background_images(config.background_images, cameras)
               if config.background_images is not None else {})
     settings = {**dataclasses.asdict(config), "last": last}
     fp = fingerprint(STEP, settings, _upstream_fingerprint(ws, cameras),
-                     {name: hashlib.sha256(path.read_bytes()).hexdigest()
+                     {name: file_digest(path)
                       for name, path in photos.items()})
     outputs = [ws.silhouettes_dir / c.name for c in cameras]
     if done := ws.reusable(STEP, fp, *outputs, overwrite=overwrite):
@@ -472,9 +428,8 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
         tmp.mkdir()
         recording.log_silhouette_context(rec, "world/cameras")
         jobs = [_CameraJob(root=ws.root.resolve(), camera=camera, frames=frames,
-                           background_frames=background_frames, median=span is None,
-                           thresholds=config.thresholds, out=tmp.resolve() / camera.name,
-                           passes=config.background_passes,
+                           background_frames=background_frames, config=config,
+                           out=tmp.resolve() / camera.name,
                            background_image=photos.get(camera.name))
                 for camera in cameras]
         if map_cameras is not None:
@@ -621,17 +576,15 @@ class _CameraJob:
     camera: Camera
     frames: list[int]
     background_frames: list[int]
-    median: bool
-    thresholds: SilhouetteConfig
+    config: SilhouettesConfig
     out: Path
-    passes: int = 2
     background_image: Path | None = None
 
     def frames_job(self, frames: list[int], model: int = 0) -> _FramesJob:
         """The classification of ``frames`` (some of ``self.frames``) against the ``model``-th
         of the background models given with it."""
         return _FramesJob(root=self.root, camera=self.camera, frames=frames,
-                          thresholds=self.thresholds, out=self.out, model=model)
+                          thresholds=self.config.thresholds, out=self.out, model=model)
 
 
 @dataclass(frozen=True)
@@ -726,13 +679,12 @@ def camera_background(job: _CameraJob) -> _Background:
             raise UserError(f"video {video_path(ws, job.camera.name).name} is "
                             f"{frame.shape[1]}x{frame.shape[0]} but cameras.json says "
                             f"{job.camera.width}x{job.camera.height} for camera {job.camera.name}")
-    if not job.median:
-        return _Background(BackgroundModel.from_frames(frames), None)
-    model = median_background(frames, job.thresholds, job.passes)
+    model = background_model(frames, job.config)
     if job.background_image is None:
         return _Background(model, None)
     photo = read_background_image(job.background_image, job.camera)
-    model, unknown, account = with_background_photo(model, frames, photo, job.thresholds)
+    model, unknown, account = with_background_photo(model, frames, photo,
+                                                    job.config.thresholds)
     return _Background(model, {"image": job.background_image.name, **account},
                        unknown if unknown.any() else None)
 

@@ -29,6 +29,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
+from recon.cameras import Camera
 from tracking.body.model import (
     LOWER_LIMITS,
     PARAM_MOVES_NODE,
@@ -40,7 +41,6 @@ from tracking.body.model import (
     pose_derivative_axes,
     scaled_shape,
 )
-from tracking.rig.cameras import Camera
 
 
 @dataclass(frozen=True, kw_only=True)

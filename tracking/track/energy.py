@@ -34,8 +34,8 @@ from typing import Any
 import cv2
 import numpy as np
 
+from recon.cameras import Camera
 from tracking.body.model import BodyModel, Pose
-from tracking.rig.cameras import Camera
 
 
 def iou(a: np.ndarray, b: np.ndarray) -> float:

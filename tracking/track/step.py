@@ -48,8 +48,9 @@ from tracking.track.tracker import FrameResult, SilhouetteTracker, TrackConfig, 
 class TrackStepConfig:
     init_pose: Path | None = field(
         default=None,
-        metadata={"help": "initial pose and shape (JSON in the tracks/pose.json layout; its "
-                  "first frame is used) instead of the automatic initialisation",
+        metadata={"help": "initial pose and shape (a pose file: tracks/pose.json, gt/pose.json "
+                  "or mocap fit's fit.json; its first pose is used) instead of the automatic "
+                  "initialisation",
                   "metavar": "FILE"},
     )  # fmt: skip
     first: int = field(default=0, metadata={"help": "first frame to track"})

@@ -52,6 +52,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize
 
+from recon.cameras import Camera
 from tracking.body.bvh import rotations_to_channels
 from tracking.body.model import (
     LOWER_LIMITS,
@@ -68,7 +69,7 @@ from tracking.body.model import (
     root_rotation,
     scaled_shape,
 )
-from tracking.rig.cameras import Camera, rig_up
+from tracking.rig.cameras import rig_up
 from tracking.silhouettes.hull import check_voxel_grid, surface_voxels, visual_hull
 from tracking.track.contour import ContourConfig, ContourRefiner, refine_shape
 from tracking.track.energy import SilhouetteEnergy, counted

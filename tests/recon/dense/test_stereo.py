@@ -14,11 +14,12 @@ import numpy as np
 import pytest
 
 from recon.dense import stereo
+from recon.dense.backends import stereo_pair_depths
 from recon.dense.stereo import (
     DepthMap,
     StereoConfig,
     View,
-    backproject,
+    backproject_pixels,
     depths_from_pair,
     select_pairs,
 )
@@ -266,7 +267,7 @@ def case_depths(
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_depth_from_pair_matches_truth(
+def test_depths_from_pair_match_truth(
     case: str,
     truths: list[Truth],
     extra: dict[str, Truth],
@@ -287,25 +288,25 @@ def test_depth_from_pair_matches_truth(
     assert (case_depths[case][1].view, case_depths[case][1].source) == (1, 0)
 
 
-def test_depth_from_pair_is_the_reference_map(truths: list[Truth]):
+def test_the_backends_pair_task_gives_both_maps_of_its_pair(truths: list[Truth]):
+    # `cpu-stereo` runs each pair as this task (in process or on Dask): its maps are the pair's
+    # own, labelled with the views' indices in the list.
     config = StereoConfig()
-    single = stereo.depth_from_pair(
-        truths[1].view, truths[2].view, config, ref_index=1, src_index=2
-    )
-    both = depths_from_pair(truths[1].view, truths[2].view, config, ref_index=1, src_index=2)
-    assert (single.view, single.source) == (1, 2)
-    np.testing.assert_array_equal(single.depth, both[0].depth)
+    views = [t.view for t in truths]
+    ref_map, src_map = stereo_pair_depths((1, 2), views, config)
+    both = depths_from_pair(views[1], views[2], config, ref_index=1, src_index=2)
+    assert (ref_map.view, ref_map.source, src_map.view, src_map.source) == (1, 2, 2, 1)
+    np.testing.assert_array_equal(ref_map.depth, both[0].depth)
+    np.testing.assert_array_equal(src_map.depth, both[1].depth)
 
 
 def test_left_right_check_removes_occlusion_errors(truths: list[Truth]):
     def gross_error_fraction(config: StereoConfig) -> float:
         errors = []
+        views = [t.view for t in truths]
         for i in (2, 3):
-            ref, src = truths[i], truths[i + 1]
-            estimate = stereo.depth_from_pair(
-                ref.view, src.view, config, ref_index=i, src_index=i + 1
-            )
-            errors.append(relative_errors(estimate.depth, ref.depth))
+            estimate, _ = stereo_pair_depths((i, i + 1), views, config)
+            errors.append(relative_errors(estimate.depth, truths[i].depth))
         return float(np.mean(np.abs(np.concatenate(errors)) > 0.05))
 
     checked = gross_error_fraction(StereoConfig())
@@ -315,23 +316,23 @@ def test_left_right_check_removes_occlusion_errors(truths: list[Truth]):
     assert unchecked > 1.5 * checked
 
 
-def test_backproject_true_depth_lies_on_the_scene_with_pixel_colours(truths: list[Truth]):
+def test_backproject_true_depth_lies_on_the_scene(truths: list[Truth]):
+    # How fusion turns depth maps into points (fused colours: tests/recon/dense/test_fusion.py).
     truth = truths[3]
-    depth = np.where(np.isfinite(truth.depth), truth.depth, np.nan).astype(np.float32)
-    points, colours = backproject(DepthMap(3, 4, depth), truth.view)
-    assert points.shape == (int(np.isfinite(depth).sum()), 3) and colours.dtype == np.uint8
+    rows, cols = np.nonzero(np.isfinite(truth.depth))
+    points = backproject_pixels(truth.view, rows, cols, truth.depth[rows, cols])
+    assert points.shape == (len(rows), 3)
     # Exact at pixel centres: a +-0.5 px slip would put points centimetres off the faces.
     assert np.quantile(distance_to_scene(points), 0.999) < 1e-3
-    rows, cols = np.nonzero(np.isfinite(depth))
-    np.testing.assert_array_equal(colours, truth.view.image_bgr[rows, cols][:, ::-1])
 
 
 def test_backproject_estimate_lies_on_the_scene(
     truths: list[Truth], case_depths: dict[str, tuple[DepthMap, DepthMap]]
 ):
     estimate = case_depths["arc-1-2"][0]
-    points, _ = backproject(estimate, truths[1].view)
-    depth = estimate.depth[np.isfinite(estimate.depth)]
+    rows, cols = np.nonzero(np.isfinite(estimate.depth))
+    depth = estimate.depth[rows, cols]
+    points = backproject_pixels(truths[1].view, rows, cols, depth)
     assert np.mean(distance_to_scene(points) < 0.01 * depth) > 0.95
 
 

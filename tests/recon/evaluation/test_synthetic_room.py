@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
+from recon.cameras import read_cameras_json
 from recon.evaluation.synthetic_room import (
     ROOM_MAX,
     ROOM_MIN,
@@ -20,7 +21,6 @@ from recon.evaluation.synthetic_room import (
     scene_quads,
     write_scene,
 )
-from recon.evaluation.truth import read_truth
 
 
 @pytest.fixture(scope="module")
@@ -319,8 +319,8 @@ def test_write_scene(scene: SyntheticScene, tmp_path: Path) -> None:
     write_scene(scene, tmp_path / "images", tmp_path / "truth.json")
     names = sorted(p.name for p in (tmp_path / "images").iterdir())
     assert names == [v.name for v in scene.views]
-    truth = read_truth(tmp_path / "truth.json")
-    assert sorted(truth) == names
+    truth = {c.name: c for c in read_cameras_json(tmp_path / "truth.json")}
+    assert list(truth) == names  # in view order
     for view in scene.views[:3]:
         bgr = cv2.imread(str(tmp_path / "images" / view.name), cv2.IMREAD_COLOR)
         np.testing.assert_array_equal(bgr[:, :, ::-1], view.image_rgb)

@@ -1,29 +1,25 @@
-"""Ground-truth file format, public data-set readers, similarity alignment and pose errors."""
+"""Ground truth by path, public data-set readers, similarity alignment and pose errors."""
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from recon.cameras import Camera, write_cameras_json
 from recon.evaluation.truth import (
-    TRUTH_FORMAT,
-    CameraTruth,
     camera_center,
     focal_error,
+    load_ground_truth,
     pose_errors,
     read_middlebury_par,
     read_strecha_cameras,
-    read_truth,
     rotation_angle_deg,
     umeyama_sim3,
-    write_truth,
 )
-
-SHARED_DATA = Path(__file__).resolve().parents[3].parent / "shared" / "data"
+from tests.helpers import shared_dataset
 
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:
@@ -195,58 +191,33 @@ def test_focal_error_is_signed_relative() -> None:
 
 
 # ---------------------------------------------------------------------------------------------
-# Ground-truth JSON
+# Ground truth by path (the file format itself: tests/recon/test_cameras.py)
 
 
-def test_truth_round_trip_is_exact(tmp_path: Path) -> None:
+def test_ground_truth_json_loads_exactly_with_its_mean_focal(tmp_path: Path) -> None:
     rng = np.random.default_rng(8)
-    K = np.array([[600.123456789, 0.0, 320.0], [0.0, 600.123456789, 240.0], [0.0, 0.0, 1.0]])
-    cameras = {
-        name: CameraTruth(width=640, height=480, K=K, cam_from_world=pose)
-        for name, pose in ring_of_cameras(rng, n=3).items()
-    }
+    cameras = [
+        Camera(name, 640, 480, [[600.0 + k, 0.0, 320.0], [0.0, 601.0 + k, 240.0], [0, 0, 1]], pose)
+        for k, (name, pose) in enumerate(ring_of_cameras(rng, n=3).items())
+    ]
     path = tmp_path / "sub" / "truth.json"
-    write_truth(path, cameras)
-    assert json.loads(path.read_text())["format"] == TRUTH_FORMAT
-    assert [p.name for p in path.parent.iterdir()] == ["truth.json"]  # no temporary left
-    back = read_truth(path)
-    assert set(back) == set(cameras)
-    for name, cam in cameras.items():
-        assert (back[name].width, back[name].height) == (640, 480)
-        np.testing.assert_array_equal(back[name].K, cam.K)
-        np.testing.assert_array_equal(back[name].cam_from_world, cam.cam_from_world)
-        np.testing.assert_allclose(back[name].center_in_world, camera_center(cam.cam_from_world))
-
-
-@pytest.mark.parametrize(
-    ("content", "message"),
-    [
-        ("{not json", "not valid JSON"),
-        ('{"format": "other", "cameras": {}}', "format"),
-        ('{"format": "mocap-cameras-v1"}', "cameras"),
-        (
-            '{"format": "mocap-cameras-v1", "cameras": {"a.png": {"width": 4, "height": 3, '
-            '"K": [[1, 0, 0], [0, 1, 0]], "cam_from_world": [[1, 0, 0, 0], [0, 1, 0, 0], '
-            "[0, 0, 1, 0]]}}}",
-            "K has shape",
-        ),
-        ('{"format": "mocap-cameras-v1", "cameras": {"a.png": {"width": 4}}}', "lacks"),
-    ],
-)
-def test_read_truth_rejects_malformed_files(tmp_path: Path, content: str, message: str) -> None:
-    path = tmp_path / "truth.json"
-    path.write_text(content)
-    with pytest.raises(ValueError, match=message) as info:
-        read_truth(path)
-    assert str(path) in str(info.value)
-    assert "\n" not in str(info.value)
+    write_cameras_json(path, cameras)
+    truth = load_ground_truth(path)
+    assert truth.focal_px == pytest.approx(601.5)  # mean of fx and fy over the cameras
+    assert truth.cameras is not None and set(truth.cameras) == {c.name for c in cameras}
+    for cam in cameras:
+        assert truth.cameras[cam.name] == cam
+        np.testing.assert_allclose(truth.cameras[cam.name].center_in_world,
+                                   camera_center(cam.cam_from_world))
+    with pytest.raises(ValueError, match="not a ground truth"):
+        load_ground_truth(tmp_path / "sub")
 
 
 # ---------------------------------------------------------------------------------------------
 # Public data sets (../shared/data, absent in a fresh clone)
 
 
-def _converging_point(cameras: dict[str, CameraTruth]) -> np.ndarray:
+def _converging_point(cameras: dict[str, Camera]) -> np.ndarray:
     """Least-squares point closest to every optical axis."""
     A = np.zeros((3, 3))
     b = np.zeros(3)
@@ -258,7 +229,7 @@ def _converging_point(cameras: dict[str, CameraTruth]) -> np.ndarray:
     return np.linalg.solve(A, b)
 
 
-def _assert_rotations_proper(cameras: dict[str, CameraTruth]) -> None:
+def _assert_rotations_proper(cameras: dict[str, Camera]) -> None:
     for cam in cameras.values():
         R = cam.cam_from_world[:, :3]
         np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-5)
@@ -267,13 +238,11 @@ def _assert_rotations_proper(cameras: dict[str, CameraTruth]) -> None:
 
 @pytest.mark.shared_data
 def test_read_middlebury_temple_ring() -> None:
-    path = SHARED_DATA / "temple_sparse_ring" / "templeSR_par.txt"
-    if not path.exists():
-        pytest.skip(f"{path} absent (../shared/data is not part of a fresh clone)")
+    path = shared_dataset("temple_sparse_ring") / "templeSR_par.txt"
     cameras = read_middlebury_par(path)
     assert len(cameras) == 16
     assert sorted(cameras)[0] == "templeSR0001.png"
-    assert all(SHARED_DATA.joinpath("temple_sparse_ring", n).exists() for n in cameras)
+    assert all(path.with_name(n).exists() for n in cameras)
     _assert_rotations_proper(cameras)
     for cam in cameras.values():
         assert (cam.width, cam.height) == (640, 480)
@@ -289,12 +258,10 @@ def test_read_middlebury_temple_ring() -> None:
 
 @pytest.mark.shared_data
 def test_read_strecha_fountain() -> None:
-    folder = SHARED_DATA / "fountain_p11" / "gt_dense_cameras"
-    if not folder.exists():
-        pytest.skip(f"{folder} absent (../shared/data is not part of a fresh clone)")
+    folder = shared_dataset("fountain_p11") / "gt_dense_cameras"
     cameras = read_strecha_cameras(folder)
     assert sorted(cameras) == [f"{i:04d}.jpg" for i in range(11)]
-    K_txt = np.loadtxt(SHARED_DATA / "fountain_p11" / "images" / "K.txt")
+    K_txt = np.loadtxt(folder.parent / "images" / "K.txt")
     _assert_rotations_proper(cameras)
     for name, cam in cameras.items():
         assert (cam.width, cam.height) == (3072, 2048)

@@ -27,8 +27,8 @@ from recon.sfm.frontend import (
     match_ncc,
     match_pair,
     run_front_end,
-    sampson_distance_px,
 )
+from recon.sfm.fundamental import sampson_distance_px
 
 CONFIG = HarrisNccConfig()
 CONSECUTIVE = [(0, 1), (1, 2)]

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.helpers import shared_dataset
 from tracking.body.bvh import (
     CMU_METRES_PER_UNIT,
     ROTATION_CHANNELS,
@@ -25,17 +26,13 @@ from tracking.body.bvh import (
     write_bvh,
 )
 
-MOCAP = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "mocap_bvh"
 WALK = "cmu_02_01_walk.bvh"
 START_WALK_STOP = "cmu_131_01_start_walk_stop.bvh"
 ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
 
 
 def cmu(name: str) -> Path:
-    path = MOCAP / name
-    if not path.is_file():
-        pytest.skip(f"real data {path} is absent (it sits beside the project in CI)")
-    return path
+    return shared_dataset("mocap_bvh") / name
 
 
 def two_joint_bvh(root_channels: str, root_values: str) -> str:
@@ -73,6 +70,7 @@ def random_rotations(rng: np.random.Generator, n: int) -> np.ndarray:
 # ----------------------------------------------------------------------------- real clips
 
 
+@pytest.mark.shared_data
 @pytest.mark.parametrize(("name", "frames"), [(WALK, 343), (START_WALK_STOP, 994)])
 def test_parses_cmu_clips(name: str, frames: int) -> None:
     motion = read_bvh(cmu(name))
@@ -93,6 +91,7 @@ def test_parses_cmu_clips(name: str, frames: int) -> None:
     assert motion.channel_slice(1) == slice(6, 9)
 
 
+@pytest.mark.shared_data
 def test_walk_first_values_match_the_file() -> None:
     motion = read_bvh(cmu(WALK))
     np.testing.assert_array_equal(
@@ -103,6 +102,7 @@ def test_walk_first_values_match_the_file() -> None:
     )
 
 
+@pytest.mark.shared_data
 @pytest.mark.parametrize("name", [WALK, START_WALK_STOP])
 def test_read_write_read_round_trip(name: str, tmp_path: Path) -> None:
     motion = read_bvh(cmu(name))
@@ -124,6 +124,7 @@ def test_read_write_read_round_trip(name: str, tmp_path: Path) -> None:
     assert not re.search(r"\de[-+]?\d", text)  # no exponent notation
 
 
+@pytest.mark.shared_data
 @pytest.mark.parametrize("name", [WALK, START_WALK_STOP])
 def test_cmu_first_frame_is_a_plausible_human(name: str) -> None:
     motion = read_bvh(cmu(name))
@@ -144,6 +145,7 @@ def test_cmu_first_frame_is_a_plausible_human(name: str) -> None:
     assert 0.55 < hips_fraction < 0.8
 
 
+@pytest.mark.shared_data
 def test_file_channel_order_keeps_stance_foot_still() -> None:
     """Truth from the clip itself: a walking stance foot barely moves. Reading the rotation
     channels in the reverse (wrong) order makes the feet skate."""
@@ -169,6 +171,7 @@ def test_file_channel_order_keeps_stance_foot_still() -> None:
     assert stance_speed(reversed_order) > 1.5 * stance_speed(motion)
 
 
+@pytest.mark.shared_data
 def test_rotations_written_in_another_order_give_the_same_pose(tmp_path: Path) -> None:
     """A pose sequence (here the CMU one) written as BVH in XYZ order reads back the same."""
     motion = read_bvh(cmu(WALK))

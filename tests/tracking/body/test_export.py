@@ -6,12 +6,14 @@ import json
 
 import numpy as np
 import open3d as o3d
+import pytest
 
 from tests.helpers import run_cli, shared_dataset
 from tracking.body.bvh import CMU_METRES_PER_UNIT, forward_kinematics, read_bvh
 from tracking.body.model import NODE_NAMES
 
 
+@pytest.mark.shared_data
 def test_body_of_a_cmu_frame(tmp_path):
     clip = shared_dataset("mocap_bvh") / "cmu_02_01_walk.bvh"
     result = run_cli("body", "--bvh", clip, "--frame", "30", "--out", tmp_path)
@@ -29,6 +31,7 @@ def test_body_of_a_cmu_frame(tmp_path):
     assert 1.3 < np.ptp(vertices[:, 1]) < 1.9  # walking: a bit shorter than standing height
 
 
+@pytest.mark.shared_data
 def test_body_rejects_a_frame_out_of_range(tmp_path):
     clip = shared_dataset("mocap_bvh") / "cmu_02_01_walk.bvh"
     result = run_cli("body", "--bvh", clip, "--frame", "5000", "--out", tmp_path)

@@ -62,6 +62,7 @@ def test_random_poses_round_trip_exactly():
             np.testing.assert_allclose(jb[name], ja[name], atol=1e-6)
 
 
+@pytest.mark.shared_data
 def test_cmu_clip_bvh_to_model_to_bvh_to_model():
     clip = read_bvh(shared_dataset("mocap_bvh") / "cmu_02_01_walk.bvh")
     result = retarget(clip, CMU_METRES_PER_UNIT, frames=range(0, clip.num_frames, 20))
@@ -76,6 +77,7 @@ def test_cmu_clip_bvh_to_model_to_bvh_to_model():
     assert text2 == text
 
 
+@pytest.mark.shared_data
 def test_other_skeletons_are_refused():
     clip = read_bvh(shared_dataset("mocap_bvh") / "cmu_02_01_walk.bvh")
     with pytest.raises(ValueError, match="not a body-model skeleton"):

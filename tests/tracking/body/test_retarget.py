@@ -3,11 +3,10 @@ walk."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
+from tests.helpers import shared_dataset
 from tracking.body.bvh import CMU_METRES_PER_UNIT, read_bvh
 from tracking.body.model import (
     LOWER_LIMITS,
@@ -21,10 +20,6 @@ from tracking.body.model import (
     node_positions_in_world,
 )
 from tracking.body.retarget import CMU_TO_BODY, fit_pose, retarget, shape_from_motion
-
-DATA = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "mocap_bvh"
-WALK = DATA / "cmu_02_01_walk.bvh"
-needs_walk = pytest.mark.skipif(not WALK.exists(), reason=f"CMU clip not found at {WALK}")
 
 SHAPE = BodyShape.default(1.75)
 LIMBS = (("l_shoulder", "l_elbow_flex"), ("r_shoulder", "r_elbow_flex"),
@@ -122,7 +117,7 @@ def test_correspondence_covers_every_node() -> None:
 
 @pytest.fixture(scope="module")
 def walk():
-    return read_bvh(WALK)
+    return read_bvh(shared_dataset("mocap_bvh") / "cmu_02_01_walk.bvh")
 
 
 @pytest.fixture(scope="module")
@@ -130,7 +125,7 @@ def walk_result(walk):
     return retarget(walk, CMU_METRES_PER_UNIT, frames=range(0, 41, 10))
 
 
-@needs_walk
+@pytest.mark.shared_data
 def test_shape_from_cmu_walk(walk) -> None:
     shape = shape_from_motion(walk, CMU_METRES_PER_UNIT)  # BodyShape checks its own height
     assert 1.5 < shape.height < 1.9
@@ -146,7 +141,7 @@ def test_shape_from_cmu_walk(walk) -> None:
     assert np.isclose(shape.chain_height, shape.height)
 
 
-@needs_walk
+@pytest.mark.shared_data
 def test_retarget_cmu_walk(walk_result) -> None:
     r = walk_result
     assert len(r.poses) == 5 and r.residual_rms_m.shape == (5,)
@@ -164,12 +159,11 @@ def test_retarget_cmu_walk(walk_result) -> None:
     assert knees.max() > 20.0
 
 
+@pytest.mark.shared_data
 def test_the_asf_named_cmu_clip_retargets_too():
     from tracking.body.retarget import CMU_ASF_TO_BODY, cmu_naming
 
-    clip_path = DATA / "cmu_131_01_start_walk_stop.bvh"
-    if not clip_path.exists():
-        pytest.skip(f"CMU clip not found at {clip_path}")
+    clip_path = shared_dataset("mocap_bvh") / "cmu_131_01_start_walk_stop.bvh"
     clip = read_bvh(clip_path)
     assert cmu_naming(clip)[0] is CMU_ASF_TO_BODY
     result = retarget(clip, CMU_METRES_PER_UNIT, frames=range(0, clip.num_frames, 50))

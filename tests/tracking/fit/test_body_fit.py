@@ -8,9 +8,11 @@ import numpy as np
 import open3d as o3d
 import pytest
 
+from recon.errors import UserError
 from recon.workspace import Workspace
 from tests.helpers import recording_entities, run_cli
-from tracking.body.model import NODE_NAMES, BodyModel, BodyShape, node_positions_in_world
+from tracking.body.model import NODE_NAMES, BodyModel, BodyShape, Pose, node_positions_in_world
+from tracking.body.motion import read_pose_file
 from tracking.body.synthetic import body_cloud, random_pose
 from tracking.fit.body_fit import FitConfig, fit_body
 from tracking.fit.step import SubjectConfig, fit_workspace, isolate_subject
@@ -42,6 +44,10 @@ def test_fit_recovers_pose_and_height_of_a_synthetic_cloud():
     assert result.residual_median < 0.006  # 5 mm noise: |N(0, 5 mm)| has median 3.4 mm
 
 
+# Slow (~45 s under load): the full search over orientations on a sphere. The same behaviour,
+# a non-human cloud is a failure, is checked faster (4 orientations) by
+# test_cli_fit_reports_failure_with_exit_code_2.
+@pytest.mark.slow
 def test_a_non_human_cloud_is_a_failure_not_a_confident_answer():
     rng = np.random.default_rng(0)
     sphere = rng.normal(size=(3000, 3))
@@ -81,6 +87,14 @@ def test_cli_fit_writes_json_mesh_and_recording(tmp_path):
     assert fit["success"] and set(fit["joints"]) == set(NODE_NAMES)
     assert _mean_joint_error_m(fit["joints"], truth) < 0.015
     assert len(fit["pose"]) == 24 and fit["residual_median"] < 0.006
+    # fit.json is a pose file: the one reader of pose.json (`mocap track --init-pose`) gives
+    # the fitted pose and shape, in the cloud's frame, on the truth.
+    poses = read_pose_file(tmp_path / "out" / "fit.json")
+    assert poses.frame_rate is None and np.array_equal(poses.world_from_upright, np.eye(3))
+    assert [frame for frame, _ in poses.frames] == [0]
+    assert poses.shape.height == pytest.approx(1.7, rel=0.01)
+    joints = node_positions_in_world(Pose(poses.frames[0][1]), poses.shape)
+    assert _mean_joint_error_m(joints, truth) < 0.015
     mesh = o3d.io.read_triangle_mesh(str(tmp_path / "out" / "fit.ply"))
     assert len(mesh.triangles) == len(BodyModel(BodyShape.default()).faces)
     entities = recording_entities(tmp_path / "out" / "fit.rrd")
@@ -98,6 +112,8 @@ def test_cli_fit_reports_failure_with_exit_code_2(tmp_path):
     assert result.returncode == 2
     assert result.stderr.strip().count("\n") == 0 and "does not look like" in result.stderr
     assert json.loads((tmp_path / "out" / "fit.json").read_text())["success"] is False
+    with pytest.raises(UserError, match="the body fit failed"):  # no pose to start from
+        read_pose_file(tmp_path / "out" / "fit.json")
     missing = run_cli("fit", "--cloud", tmp_path / "nope.ply", "--out", tmp_path / "o2")
     assert missing.returncode == 2 and "no such file" in missing.stderr
 

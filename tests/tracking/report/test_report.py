@@ -181,6 +181,36 @@ def test_bad_workspace_inputs_get_one_line_messages(tmp_path: Path) -> None:
         report_from_workspace(tmp_path, ReportConfig(cutoff_hz=14.0))
 
 
+def test_a_synthetic_truth_is_reported_only_when_asked(tmp_path: Path) -> None:
+    """A `mocap synth` workspace not tracked yet: its gt/pose.json is no tracked motion."""
+    write_pose_track(tmp_path, walking_params(40))
+    (tmp_path / "gt").mkdir()
+    (tmp_path / "tracks" / "pose.json").rename(tmp_path / "gt" / "pose.json")
+    with pytest.raises(UserError, match=r"tracks/pose.json not found.*reported with --truth"):
+        report_from_workspace(tmp_path, ReportConfig())
+    assert not (tmp_path / "report").exists() and not (tmp_path / "run.json").exists()
+    truth = report_from_workspace(tmp_path, ReportConfig(truth=True))
+    assert truth.report_dir == tmp_path / "gt" / "report"
+    assert truth.recording == tmp_path / "logs" / "report-truth.rrd" and truth.recording.is_file()
+    assert truth.summary["source"].endswith("gt/pose.json") and truth.summary["frames"] == 40
+    assert list(json.loads((tmp_path / "run.json").read_text())["steps"]) == ["report-truth"]
+    assert report_from_workspace(tmp_path, ReportConfig(truth=True)).reused
+    with pytest.raises(UserError, match="--truth reports the ground truth"):
+        report_from_workspace(tmp_path / "tracked", ReportConfig(truth=True))
+    with pytest.raises(UserError, match="not a BVH clip"):
+        report_from_bvh(tmp_path / "clip.bvh", tmp_path / "out", ReportConfig(truth=True))
+
+
+def test_a_single_pose_is_no_motion_to_report(tmp_path: Path) -> None:
+    """`mocap fit`'s fit.json is a pose file without a frame rate."""
+    path = write_pose_track(tmp_path, walking_params(1))
+    data = json.loads(path.read_text())
+    del data["frame_rate"]
+    path.write_text(json.dumps(data))
+    with pytest.raises(UserError, match="without a frame rate .*not a motion to report"):
+        report_from_workspace(tmp_path, ReportConfig())
+
+
 def test_cli_reports_a_workspace(tmp_path: Path) -> None:
     write_pose_track(tmp_path / "ws", walking_params(40))
     ok = run_cli("report", tmp_path / "ws", "--cutoff-hz", "5", "--plot-format", "svg")

@@ -14,12 +14,13 @@ import numpy as np
 import pytest
 
 from plugins.registry import create
+from recon.cameras import Camera
 from recon.errors import UserError
 from tests.helpers import recording_entities, run_cli, shared_dataset
 from tracking.body.bvh import write_bvh
 from tracking.body.model import NODE_NAMES, BodyModel, BodyShape, Pose, node_positions_in_world
 from tracking.body.motion import motion_from_poses
-from tracking.rig.cameras import Camera, read_cameras
+from tracking.rig.cameras import read_cameras
 from tracking.rig.synth import (
     SynthConfig,
     hole_mask,
@@ -245,6 +246,41 @@ def test_rerun_is_skipped_and_overwrite_redoes(body_bvh, tmp_path):
     assert not list(ws.rglob("*.partial*"))
 
 
+def _decoded(video: Path) -> list[np.ndarray]:
+    capture = cv2.VideoCapture(str(video))
+    frames = []
+    while (read := capture.read())[0]:
+        frames.append(read[1])
+    capture.release()
+    return frames
+
+
+def test_videos_show_the_subject_over_the_empty_scene(body_bvh, tmp_path):
+    """--videos: per camera a video whose frame k shows the exact silhouette of frame k in the
+    subject's red over the camera's empty scene, which is also written as a photo."""
+    path, _ = body_bvh
+    ws = tmp_path / "ws"
+    config = SynthConfig(bvh=path, cameras=2, size="200x150", frames=3, clean=True, videos=True)
+    result = synthesize(ws, config)
+    assert any(line.startswith("videos      ") for line in result.lines())
+    for camera in ("cam00", "cam01"):
+        frames = _decoded(ws / "render" / "videos" / f"{camera}.avi")
+        photo = cv2.imread(str(ws / "render" / "backgrounds" / f"{camera}.png"))
+        assert len(frames) == 3 and photo.shape == frames[0].shape == (150, 200, 3)
+        for k, frame in enumerate(frames):
+            mask = _mask(ws, camera, k).astype(np.uint8)
+            inside = cv2.erode(mask, np.ones((5, 5), np.uint8)) > 0
+            outside = cv2.dilate(mask, np.ones((7, 7), np.uint8)) == 0
+            assert inside.sum() > 200
+            # MJPG at quality 95: a grey level or two away from the exact pictures.
+            assert np.abs(frame[outside].astype(int) - photo[outside]).mean() < 3.0
+            assert frame[inside][:, 2].mean() > 200 and frame[inside][:, 0].mean() < 80
+    # The same settings again: reused; without --videos, the videos of the old settings go.
+    assert synthesize(ws, config).reused
+    synthesize(ws, replace(config, videos=False))
+    assert not (ws / "render").exists()
+
+
 def _assert_one_line_error(result, needle: str) -> None:
     assert result.returncode == 2, (result.stdout, result.stderr)
     assert "Traceback" not in result.stderr
@@ -353,15 +389,22 @@ def test_ring_grows_until_the_subject_fits():
 
 
 @pytest.mark.shared_data
-def test_report_of_a_synthetic_sequence_uses_its_ground_truth(tmp_path):
+def test_report_of_a_synthetic_sequence_reports_its_ground_truth_only_when_asked(tmp_path):
     walk = shared_dataset("mocap_bvh") / "cmu_02_01_walk.bvh"
     ws = tmp_path / "walk"
     made = run_cli("synth", ws, "--bvh", walk, "--frames", "24", "--size", "160x120", "--clean")
     assert made.returncode == 0, made.stderr
-    report = run_cli("report", ws)
+    # Not tracked yet: refused in one line that points at --truth, and nothing is written, so
+    # no report of the truth can pass for one of a tracked motion.
+    refused = run_cli("report", ws)
+    assert refused.returncode == 2 and refused.stderr.strip().count("\n") == 0
+    assert "tracks/pose.json not found" in refused.stderr and "--truth" in refused.stderr
+    assert not (ws / "report").exists() and not (ws / "logs" / "report.rrd").exists()
+    report = run_cli("report", ws, "--truth")
     assert report.returncode == 0, report.stderr
-    assert "gt/pose.json" in report.stdout
-    with (ws / "report" / "center_of_mass.csv").open() as handle:
+    assert "gt/pose.json" in report.stdout and str(ws / "gt" / "report") in report.stdout
+    assert (ws / "logs" / "report-truth.rrd").is_file() and not (ws / "report").exists()
+    with (ws / "gt" / "report" / "center_of_mass.csv").open() as handle:
         rows = list(csv.DictReader(handle))
     assert len(rows) == 24
     # The CMU walk moves at about 1.25 m/s along Z: the centre of mass follows.

@@ -11,11 +11,12 @@ import cv2
 import numpy as np
 import pytest
 
+from recon.cameras import Camera, write_cameras_json
 from recon.cli import main
 from recon.errors import UserError
 from recon.workspace import Workspace
 from tests.helpers import run_cli, shared_dataset
-from tracking.rig.cameras import Camera, read_cameras, ring_cameras, write_cameras_json
+from tracking.rig.cameras import read_cameras, ring_cameras
 from tracking.rig.video import init_video, match_videos, read_frames, video_info
 
 WIDTH, HEIGHT, FRAMES = 200, 150, 24

@@ -4,13 +4,13 @@ demo for plausibility."""
 from __future__ import annotations
 
 import hashlib
-import warnings
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
+from recon.cameras import Camera
 from recon.errors import UserError
 from recon.workspace import Workspace
 from tests.helpers import recording_entities, run_cli, shared_dataset
@@ -22,19 +22,17 @@ from tests.tracking.rig.test_video import (
     make_ball_scene,
     make_blob_scene,
 )
-from tracking.rig.cameras import Camera, read_cameras
+from tracking.rig.cameras import read_cameras
 from tracking.rig.video import init_video
 from tracking.silhouettes.hull import HullCheckConfig
 from tracking.silhouettes.step import (
     SilhouettesConfig,
-    _free_median,
     background_images,
+    background_sample,
     frame_chunks,
     make_silhouettes,
-    median_background,
     summary_lines,
 )
-from tracking.silhouettes.subtraction import BackgroundModel
 
 
 @pytest.fixture(scope="module")
@@ -60,55 +58,15 @@ def iou(a: np.ndarray, b: np.ndarray) -> float:
     return float((a & b).sum() / max((a | b).sum(), 1))
 
 
-def test_median_background_equals_from_sequence():
-    rng = np.random.default_rng(3)
-    frames = [rng.integers(0, 256, (17, 23, 3), dtype=np.uint8) for _ in range(9)]
-    frames[4][:5] = 255  # something passing through
-    ours = median_background(frames, passes=1)
-    reference = BackgroundModel.from_sequence(frames)
-    np.testing.assert_array_equal(ours.mean, reference.mean)
-    np.testing.assert_allclose(ours.std, reference.std, rtol=1e-6)
-    with pytest.raises(ValueError, match="odd"):
-        median_background(frames[:8])
-
-
-def test_second_background_pass_leaves_out_the_subject():
-    # A subject of changing colour stands on the left half in 8 of 21 frames: its colours
-    # inflate the first pass's spread there (so faint parts of it would pass as background);
-    # the second pass takes the median and spread over the frames where it is absent.
-    rng = np.random.default_rng(5)
-    frames = []
-    for k in range(21):
-        frame = np.clip(rng.normal(100, 2, (40, 60, 3)), 0, 255).astype(np.uint8)
-        if k % 5 in (0, 2):
-            frame[5:35, 5:30] = rng.integers(140, 250, 3).astype(np.uint8)
-        frames.append(frame)
-    one = median_background(frames, passes=1)
-    two = median_background(frames, passes=2)
-    spot, clear = (slice(10, 30), slice(10, 25)), (slice(10, 30), slice(40, 55))
-    assert np.median(one.std[spot]) > 1.5 * np.median(one.std[clear])
-    assert np.median(two.std[spot]) < 1.25 * np.median(two.std[clear])
-    np.testing.assert_allclose(np.median(two.mean[spot]), 100, atol=1.5)
-    # Where nothing passed, the second pass changes nothing of note.
-    np.testing.assert_allclose(two.std[clear], one.std[clear], rtol=0.35, atol=0.5)
-
-
-def test_free_median_is_the_median_over_the_free_frames():
-    rng = np.random.default_rng(8)
-    frames = [rng.integers(0, 256, (7, 9, 3), dtype=np.uint8) for _ in range(9)]
-    free = rng.random((9, 7, 9)) < 0.6
-    previous = median_background(frames, passes=1)
-    got = _free_median(frames, free, previous)
-    stack = np.stack(frames).astype(float)
-    stack[~free] = np.nan
-    with np.errstate(all="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        median = np.nanmedian(stack, axis=0)
-        mad = np.nanmedian(np.abs(stack - median[None]), axis=0)
-    enough = free.sum(axis=0) >= 9 // 4
-    np.testing.assert_allclose(got.mean[enough], median[enough])
-    np.testing.assert_allclose(got.std[enough], 1.4826 * mad[enough], rtol=1e-5)
-    np.testing.assert_array_equal(got.mean[~enough], previous.mean[~enough])
+def test_background_sample_is_odd_and_spread_or_within_the_empty_frames():
+    # The frames the model is built from, the very ones the CDnet benchmark scores.
+    assert background_sample(100, SilhouettesConfig(background_samples=4)) == [0, 25, 50, 74, 99]
+    default = background_sample(100, SilhouettesConfig())
+    assert len(default) == 21 and default[0] == 0 and default[-1] == 99
+    empty = SilhouettesConfig(background="frames:10-19")
+    assert background_sample(100, empty) == list(range(10, 20))
+    with pytest.raises(UserError, match="the videos end at frame 15"):
+        background_sample(16, empty)
 
 
 def test_silhouettes_of_a_moving_blob_match_the_truth(blob_workspace):

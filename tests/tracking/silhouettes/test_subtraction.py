@@ -4,17 +4,20 @@ background, CDnet scoring against hand counts, bad input, and CDnet highway."""
 from __future__ import annotations
 
 import math
+import warnings
 
 import cv2
 import numpy as np
 import pytest
 
 from tests.helpers import shared_dataset
+from tracking.silhouettes.step import SilhouettesConfig, background_model, background_sample
 from tracking.silhouettes.subtraction import (
     BackgroundModel,
     Counts,
     Label,
     SilhouetteConfig,
+    _free_median,
     classify,
     confusion_counts,
     f_measure,
@@ -172,7 +175,68 @@ def test_temporal_median_recovers_background_behind_moving_object() -> None:
     assert np.median(plain.std[covered > 5]) > 10 * NOISE
     assert np.abs(plain.mean - background)[covered > 5].mean() > 10
     # Every second frame is nearly as good.
-    assert np.abs(BackgroundModel.from_sequence(frames, step=2).mean - background).max() < 5
+    assert np.abs(BackgroundModel.from_sequence(frames[::2]).mean - background).max() < 5
+
+
+def _median_and_mad(frames: list[np.ndarray], free: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """numpy's median and 1.4826 MAD over the frames (where `free` (N, H, W), if given)."""
+    stack = np.stack(frames).astype(float)
+    if free is not None:
+        stack[~free] = np.nan
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        median = np.nanmedian(stack, axis=0)
+        mad = np.nanmedian(np.abs(stack - median[None]), axis=0)
+    return median, 1.4826 * mad
+
+
+@pytest.mark.parametrize("count", [9, 8])
+def test_one_pass_is_the_temporal_median_and_mad(count: int) -> None:
+    # Odd counts take the 8-bit sorting network, even ones the mean of the two middle values.
+    rng = np.random.default_rng(3)
+    frames = [rng.integers(0, 256, (17, 23, 3), dtype=np.uint8) for _ in range(count)]
+    frames[4][:5] = 255  # something passing through
+    model = BackgroundModel.from_sequence(frames, passes=1)
+    median, spread = _median_and_mad(frames)
+    np.testing.assert_array_equal(model.mean, median)
+    np.testing.assert_allclose(model.std, spread, rtol=1e-6)
+    grey = BackgroundModel.from_sequence([f[:, :, 1] for f in frames], passes=1)
+    np.testing.assert_array_equal(grey.mean[:, :, 0], median[:, :, 1])
+
+
+def test_second_background_pass_leaves_out_the_subject() -> None:
+    # A subject of changing colour stands on the left half in 8 of 21 frames: its colours
+    # inflate the first pass's spread there (so faint parts of it would pass as background);
+    # the second pass takes the median and spread over the frames where it is absent.
+    rng = np.random.default_rng(5)
+    frames = []
+    for k in range(21):
+        frame = np.clip(rng.normal(100, 2, (40, 60, 3)), 0, 255).astype(np.uint8)
+        if k % 5 in (0, 2):
+            frame[5:35, 5:30] = rng.integers(140, 250, 3).astype(np.uint8)
+        frames.append(frame)
+    one = BackgroundModel.from_sequence(frames, passes=1)
+    two = BackgroundModel.from_sequence(frames, passes=2)
+    spot, clear = (slice(10, 30), slice(10, 25)), (slice(10, 30), slice(40, 55))
+    assert np.median(one.std[spot]) > 1.5 * np.median(one.std[clear])
+    assert np.median(two.std[spot]) < 1.25 * np.median(two.std[clear])
+    np.testing.assert_allclose(np.median(two.mean[spot]), 100, atol=1.5)
+    # Where nothing passed, the second pass changes nothing of note.
+    np.testing.assert_allclose(two.std[clear], one.std[clear], rtol=0.35, atol=0.5)
+
+
+def test_free_median_is_the_median_over_the_free_frames() -> None:
+    rng = np.random.default_rng(8)
+    frames = [rng.integers(0, 256, (7, 9, 3), dtype=np.uint8) for _ in range(9)]
+    free = rng.random((9, 7, 9)) < 0.6
+    previous = BackgroundModel.from_sequence(frames, passes=1)
+    got = _free_median(frames, free, previous)
+    median, spread = _median_and_mad(frames, free)
+    enough = free.sum(axis=0) >= 9 // 4
+    np.testing.assert_allclose(got.mean[enough], median[enough])
+    np.testing.assert_allclose(got.std[enough], spread[enough], rtol=1e-5)
+    np.testing.assert_array_equal(got.mean[~enough], previous.mean[~enough])
 
 
 # ------------------------------------------------------------------------------------ scoring
@@ -223,7 +287,8 @@ def test_bad_input_raises_one_line_value_errors() -> None:
         (lambda: classify(np.zeros((11, 12, 3), np.uint8), BackgroundModel.from_frames([a])),
          "background model is"),
         (lambda: classify(np.full(a.shape, np.nan), BackgroundModel.from_frames([a])), "NaN"),
-        (lambda: BackgroundModel.from_sequence([a], step=0), "step"),
+        (lambda: BackgroundModel.from_sequence([a], passes=0), "passes"),
+        (lambda: BackgroundModel.from_sequence([a.astype(np.float32)]), "uint8"),
         (lambda: SilhouetteConfig(lower_sigma=5, upper_sigma=4), "lower_sigma"),
         (lambda: f_measure(np.zeros((3, 3), bool), np.zeros((3, 4), np.uint8)), "ground truth"),
     ]  # fmt: skip
@@ -244,13 +309,17 @@ def test_cdnet_highway_f_measure() -> None:
     def read(i: int) -> np.ndarray:
         return cv2.imread(str(data / "input" / f"in{i:06d}.jpg"))
 
-    # The benchmark's model with a coarser stride (every 4th frame before the scored range),
-    # scored on every 10th frame: a few seconds instead of ten.
-    model = BackgroundModel.from_sequence([read(i) for i in range(1, first, 4)])
+    # The benchmark's first row: the model of `mocap silhouettes` with its defaults from the
+    # frames before the scored range (the step's indexes are 0-based, CDnet's names 1-based),
+    # scored on every 10th frame: a second instead of six.
+    config = SilhouettesConfig()
+    used = background_sample(first - 1, config)
+    model = background_model([read(i + 1) for i in used], config)
     roi = cv2.imread(str(data / "ROI.bmp"), cv2.IMREAD_GRAYSCALE)
     counts = Counts()
     for i in range(first, 901, 10):
         gt = cv2.imread(str(data / "groundtruth" / f"gt{i:06d}.png"), cv2.IMREAD_GRAYSCALE)
-        counts += confusion_counts(silhouette_from_frame(read(i), model), gt, roi)
+        counts += confusion_counts(silhouette_from_frame(read(i), model, config.thresholds),
+                                   gt, roi)
     assert counts.tp > 10_000  # cars were there to find
-    assert counts.f_measure >= 0.85
+    assert counts.f_measure >= 0.92  # 0.953 when written; the benchmark's target is 0.90

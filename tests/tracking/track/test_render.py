@@ -11,8 +11,9 @@ import pytest
 from plugins import registry
 from plugins.protocols import SilhouetteRenderer
 from plugins.registry import PluginError
+from recon.cameras import Camera, look_at
 from tracking.body.model import LOWER_LIMITS, UPPER_LIMITS, BodyModel, BodyShape, Pose, superquadric
-from tracking.rig.cameras import Camera, look_at, ring_cameras
+from tracking.rig.cameras import ring_cameras
 from tracking.track import render
 from tracking.track.render import rasterize_triangles
 

@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from recon.cameras import write_cameras_json
 from tests.helpers import recording_entities, run_cli, shared_dataset
 from tracking.body.bvh import read_bvh
 from tracking.body.model import (
@@ -20,7 +21,7 @@ from tracking.body.model import (
     root_rotation,
 )
 from tracking.body.motion import is_body_skeleton, poses_from_motion
-from tracking.rig.cameras import read_cameras, ring_cameras, write_cameras_json
+from tracking.rig.cameras import read_cameras, ring_cameras
 from tracking.track.render import CpuRasterRenderer
 from tracking.track.tracker import SilhouetteTracker, TrackConfig, upright_starts
 
