@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from plugins.protocols import Command
 
 _EPILOG = """examples:
-  mocap demo                                  synthetic scene → model, errors vs truth
+  mocap demo                                  the three modules on generated data, vs truth
   mocap init ws/temple --images photos/       make a workspace from a folder of photos
   mocap sfm ws/temple                         sparse model in ws/temple/sparse/0
   mocap run ws/statue --images photos/        photos → sparse → dense → mesh (PLY/OBJ/GLB)
@@ -34,6 +34,7 @@ _EPILOG = """examples:
   mocap synth ws/walk --bvh clip.bvh          synthetic multi-camera silhouettes + ground truth
   mocap init-video ws/demo --videos videos/ --calibration Calib.qca.txt   a video workspace
   mocap silhouettes ws/demo                   foreground masks of every video frame
+  mocap capture ws/lab --videos videos/ --calibration Calib.toml   videos → tracks → report
   mocap track ws/walk                         silhouette tracking → tracks/*.csv, .json, .bvh
   mocap report ws/walk                        joint angles, COM, joint loads → report/
   mocap view ws/temple                        open the recordings in the Rerun viewer
