@@ -108,21 +108,39 @@ def _remove(path: Path) -> None:
         path.unlink()
 
 
+_SQLITE_SIDECARS = ("-wal", "-shm", "-journal")
+"""SQLite's files beside a database (write-ahead log, its index, rollback journal): part of the
+database. A stale one beside a fresh copy is replayed into it by SQLite, so they are removed and
+moved together with the database (issue 23: a killed run's ``-wal`` corrupted the next copy)."""
+
+
+def _sidecars(path: Path) -> list[Path]:
+    return [path.with_name(path.name + suffix) for suffix in _SQLITE_SIDECARS]
+
+
+def _remove_with_sidecars(path: Path) -> None:
+    _remove(path)
+    for sidecar in _sidecars(path):
+        _remove(sidecar)
+
+
 @contextlib.contextmanager
 def atomic_output(target: Path, *, seed_from: Path | None = None) -> Iterator[Path]:
     """Yield a temporary path next to ``target``; on success it replaces ``target``.
 
     ``seed_from`` copies an existing file first, for steps that update a file in place (the
     COLMAP database). On failure the temporary path is removed and ``target`` is untouched.
+    SQLite's sidecar files (``-wal``, ``-shm``, ``-journal``) of the temporary path are removed
+    with it, and travel with it on success, so a killed run's leftovers never reach a copy.
     """
     tmp = partial_path(target)
-    _remove(tmp)
+    _remove_with_sidecars(tmp)
     if seed_from is not None:
         shutil.copy2(seed_from, tmp)
     try:
         yield tmp
     except BaseException:
-        _remove(tmp)
+        _remove_with_sidecars(tmp)
         raise
     if tmp.is_dir():
         # A directory cannot be atomically swapped over a non-empty one: move the old one aside
@@ -134,7 +152,13 @@ def atomic_output(target: Path, *, seed_from: Path | None = None) -> Iterator[Pa
         os.replace(tmp, target)
         _remove(old)
     else:
+        # The target's own sidecars belong to the file being replaced: drop them first.
+        for sidecar in _sidecars(target):
+            _remove(sidecar)
         os.replace(tmp, target)
+        for tmp_sidecar, sidecar in zip(_sidecars(tmp), _sidecars(target), strict=True):
+            if tmp_sidecar.exists():
+                os.replace(tmp_sidecar, sidecar)
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,11 @@
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
+import shutil
+import sqlite3
 from pathlib import Path
 
 import numpy as np
@@ -165,3 +168,46 @@ def test_a_new_step_version_is_not_reused_and_changes_what_follows(tmp_path, mon
     assert not ws.is_done("step", fp, out) and ws.reusable("step", fp, out) is None
     ws.record_step("step", fp, config={}, seconds=0.1)
     assert ws.is_done("step", fp, out) and ws.step("step").fingerprint != old_upstream
+
+
+def _rows(path: Path) -> int:
+    with contextlib.closing(sqlite3.connect(path)) as db:
+        return db.execute("SELECT COUNT(*) FROM t").fetchone()[0]
+
+
+def _database_with_stale_wal(tmp_path: Path) -> tuple[Path, Path]:
+    """database.db (3 rows, WAL mode) and, beside its partial copy, the write-ahead log of a run
+    that was killed after writing 100 rows into that copy (the copy itself removed, as
+    `atomic_output` removed it)."""
+    target = tmp_path / "database.db"
+    with contextlib.closing(sqlite3.connect(target)) as db:
+        db.execute("PRAGMA journal_mode=WAL")
+        db.execute("CREATE TABLE t (x INTEGER)")
+        db.executemany("INSERT INTO t VALUES (?)", [(i,) for i in range(3)])
+        db.commit()
+    partial = tmp_path / "database.partial.db"
+    shutil.copy2(target, partial)
+    stash = tmp_path / "stale-wal"
+    with contextlib.closing(sqlite3.connect(partial)) as db:
+        db.execute("PRAGMA wal_autocheckpoint=0")
+        db.executemany("INSERT INTO t VALUES (?)", [(i,) for i in range(100)])
+        db.commit()
+        shutil.copy2(partial.with_name(partial.name + "-wal"), stash)
+    partial.unlink()
+    os.replace(stash, partial.with_name(partial.name + "-wal"))
+    return target, partial
+
+
+def test_a_killed_runs_write_ahead_log_never_reaches_the_next_copy(tmp_path):
+    target, partial = _database_with_stale_wal(tmp_path)
+    # What SQLite does with it when nothing removes it: the stale rows come back.
+    shutil.copy2(target, tmp_path / "copy.db")
+    shutil.copy2(partial.with_name(partial.name + "-wal"), tmp_path / "copy.db-wal")
+    assert _rows(tmp_path / "copy.db") == 103
+    with atomic_output(target, seed_from=target) as db:
+        assert _rows(db) == 3
+        with contextlib.closing(sqlite3.connect(db)) as conn:
+            conn.execute("INSERT INTO t VALUES (7)")
+            conn.commit()
+    assert _rows(target) == 4
+    assert not any(p.name.startswith("database.partial") for p in tmp_path.iterdir())
