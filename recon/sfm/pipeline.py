@@ -125,6 +125,13 @@ class SfMConfig:
             )
         if self.max_image_size < 100:
             raise UserError(f"--max-image-size {self.max_image_size} is too small (min 100)")
+        # Checked here, before COLMAP sees them: COLMAP aborts the process (SIGABRT) on an
+        # overlap of 0 and fails obscurely on no features (issue 23).
+        if self.max_num_features < 1:
+            raise UserError(f"--max-num-features {self.max_num_features}: give at least 1")
+        if self.sequential_overlap < 1:
+            raise UserError(f"--sequential-overlap {self.sequential_overlap}: give at least 1 "
+                            "(each image is matched with that many following images)")
 
 
 _CAMERA_MODELS = {

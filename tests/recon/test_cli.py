@@ -88,6 +88,17 @@ def test_unknown_plugin_and_bad_option(tmp_path):
                            "focal_px")
 
 
+def test_sfm_options_colmap_would_abort_on_are_refused_first(tmp_path):
+    _noise_images(tmp_path / "photos", 2)
+    run_cli("init", tmp_path / "ws", "--images", tmp_path / "photos")
+    for flags, message in ((("--matcher", "sequential", "--sequential-overlap", "0"),
+                            "--sequential-overlap 0"),
+                           (("--max-num-features", "0"), "--max-num-features 0"),
+                           (("--max-num-features", "-1"), "--max-num-features -1")):
+        _assert_one_line_error(run_cli("sfm", tmp_path / "ws", *flags), message)
+    assert not (tmp_path / "ws" / "database.db").exists()  # COLMAP never ran
+
+
 def test_plugins_lists_every_kind():
     result = run_cli("plugins")
     assert result.returncode == 0
