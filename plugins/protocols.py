@@ -166,6 +166,9 @@ class Command(Protocol):
     """One line, listed by ``mocap --help``."""
     description: ClassVar[str]
     """The paragraph of ``mocap NAME --help`` ("" for none)."""
+    # Optional: ``writes_workspace: ClassVar[bool] = False`` for a command whose ``workspace``
+    # argument it only reads. Otherwise `mocap` holds that workspace's lock while it runs
+    # (:func:`recon.workspace.workspace_lock`), and a second writer is refused.
 
     def add_arguments(self, parser: argparse.ArgumentParser) -> None:
         """Add the command's flags to its own parser (built only when it is invoked)."""

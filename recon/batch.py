@@ -376,11 +376,14 @@ def _failed(step: str, exc: BaseException, seconds: float) -> StepOutcome:
 
 
 def _guarded_step(root: Path, name: str, step: BatchStep, settings: _Settings) -> StepOutcome:
+    from recon.workspace import workspace_lock
+
     start = time.perf_counter()
     try:
         if (reason := _not_applicable(root, step)) is not None:
             return StepOutcome(name, StepStatus.SKIPPED, reason=reason)
-        return _run_step(root, name, step, settings)
+        with workspace_lock(root, f"mocap batch, step {name}"):
+            return _run_step(root, name, step, settings)
     except Exception as exc:  # one workspace's failure must not stop the batch
         return _failed(name, exc, time.perf_counter() - start)
 

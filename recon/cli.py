@@ -11,6 +11,7 @@ loaded is listed as broken and, when invoked, fails with one line; the others st
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 from collections.abc import Sequence
@@ -120,7 +121,9 @@ def _version() -> str:
 
 def _quiet_colmap(verbose: bool) -> None:
     # glog levels: 0 INFO, 1 WARNING, 2 ERROR. COLMAP's warnings are about situations we report
-    # ourselves in plain words, so only errors pass by default.
+    # ourselves in plain words, so only errors pass by default; errors we restate in our one
+    # line (mapping's "Failed to create any sparse model") are held back at this level too, by
+    # recon.sfm.pipeline._colmap_errors_restated.
     level = 0 if verbose else 2
     if "pycolmap" in sys.modules:
         sys.modules["pycolmap"].logging.minloglevel = level
@@ -128,6 +131,20 @@ def _quiet_colmap(verbose: bool) -> None:
         # glog reads its flags from the environment when pycolmap loads: a command that never
         # runs COLMAP (`mocap plugins`, `mocap report`) does not pay for importing it.
         os.environ["GLOG_minloglevel"] = str(level)  # noqa: SIM112 - glog's own spelling
+
+
+def _workspace_lock(
+    command: Command, args: argparse.Namespace
+) -> contextlib.AbstractContextManager[None]:
+    """The lock of the workspace a command writes (its ``WS`` argument), so that a second
+    `mocap` run on it is refused in one line; none for commands that declare
+    ``writes_workspace = False`` (`mocap view`) or take no workspace."""
+    workspace = getattr(args, "workspace", None)
+    if not isinstance(workspace, os.PathLike) or not getattr(command, "writes_workspace", True):
+        return contextlib.nullcontext()
+    from recon.workspace import workspace_lock
+
+    return workspace_lock(workspace, f"mocap {args.command}")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -143,7 +160,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from plugins.registry import PluginError
 
     try:
-        command.run(args)
+        with _workspace_lock(command, args):
+            command.run(args)
     except (UserError, PluginError) as exc:
         print(f"mocap {args.command}: error: {exc}", file=sys.stderr)
         return 2

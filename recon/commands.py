@@ -285,6 +285,7 @@ class ExperimentCommand:
 class ViewCommand:
     help = "open the workspace's recordings in the Rerun viewer"
     description = ""
+    writes_workspace = False
 
     def add_arguments(self, parser: argparse.ArgumentParser) -> None:
         parser.add_argument("workspace", type=Path, metavar="WS", help="workspace folder")

@@ -23,7 +23,11 @@ Conventions, stated once here and used everywhere:
 from __future__ import annotations
 
 import contextlib
+import errno
+import os
 import re
+import tempfile
+import threading
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 
@@ -39,17 +43,129 @@ MAX_LOGGED_IMAGE_SIZE = 1024
 
 @contextlib.contextmanager
 def step_recording(path: Path, step: str) -> Iterator[rr.RecordingStream]:
-    """A recording stream saved atomically to ``path``."""
-    with atomic_output(path) as tmp:
+    """A recording stream saved atomically to ``path``.
+
+    Raises :class:`~recon.errors.UserError` when the file cannot be written in full (a full
+    disk), after the block; ``path`` is then left as it was.
+    """
+    with atomic_output(path) as tmp, _checked_sink(tmp, path) as sink:
         rec = rr.RecordingStream(APP_ID, recording_id=f"{step}-{path.parent.parent.name}")
-        rec.save(tmp)
+        rec.save(sink)
         rec.send_recording_name(step)
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Y_DOWN, static=True)
         try:
             yield rec
         finally:
-            rec.flush()
-            rec.disconnect()
+            try:
+                rec.flush()
+            finally:
+                rec.disconnect()  # closes the FIFO: the copier reads to its end and stops
+
+
+_RRD_FOOTER = b"RRF2FOOT"
+"""How a complete .rrd file of rerun-sdk 0.41 ends (then a 4-byte version): a file cut short
+by a failed write does not."""
+
+
+class _Copier(threading.Thread):
+    """Copies what Rerun writes into a FIFO to the real file, and keeps any write error.
+
+    Rerun's own file sink cannot fail safely: once a write fails (a full disk), its flush waits
+    forever and so does dropping the stream (rerun-sdk 0.41, measured; issue 23 saw a 12-minute
+    hang). Behind a FIFO, Rerun's writes always succeed; this thread does the real writes, and
+    after a failure it goes on reading (and dropping) so that Rerun never blocks.
+    """
+
+    def __init__(self, fifo: Path, target: Path) -> None:
+        super().__init__(daemon=True, name=f"rrd-copy-{target.name}")
+        self.fifo, self.target = fifo, target
+        self.error: OSError | None = None
+        self.opened = False
+        self.tail = b""
+
+    def run(self) -> None:
+        try:
+            source = open(self.fifo, "rb")  # noqa: SIM115 - closed below, after draining
+        except OSError as exc:
+            self.error = exc
+            return
+        self.opened = True
+        with source:
+            try:
+                sink = open(self.target, "wb")  # noqa: SIM115
+            except OSError as exc:
+                self.error, sink = exc, None
+            try:
+                while chunk := source.read(1 << 20):
+                    self.tail = (self.tail + chunk)[-16:]
+                    if sink is not None and self.error is None:
+                        try:
+                            sink.write(chunk)
+                        except OSError as exc:
+                            self.error = exc
+                if sink is not None and self.error is None:
+                    sink.flush()
+                    os.fsync(sink.fileno())
+            except OSError as exc:
+                self.error = self.error or exc
+            finally:
+                if sink is not None:
+                    try:
+                        sink.close()
+                    except OSError as exc:
+                        self.error = self.error or exc
+
+    def release(self) -> None:
+        """End the thread when Rerun never opened the FIFO (its ``save`` failed)."""
+        with contextlib.suppress(OSError):
+            os.close(os.open(self.fifo, os.O_WRONLY | os.O_NONBLOCK))
+
+
+@contextlib.contextmanager
+def _checked_sink(tmp: Path, path: Path) -> Iterator[Path]:
+    """The path for Rerun to save to, so that writing ``tmp`` is checked (see `_Copier`).
+
+    Where FIFOs do not exist (Windows), Rerun writes ``tmp`` itself and only the footer of the
+    result is checked.
+    """
+    from recon.errors import UserError
+
+    if not hasattr(os, "mkfifo"):
+        yield tmp
+        copier = None
+    else:
+        with tempfile.TemporaryDirectory(prefix="mocap-rrd-") as folder:
+            fifo = Path(folder) / "stream.rrd"
+            os.mkfifo(fifo)
+            copier = _Copier(fifo, tmp)
+            copier.start()
+            try:
+                yield fifo
+            finally:
+                # Rerun has closed the FIFO (disconnect) by now, so an opened copier ends as
+                # soon as it has written the rest; one still waiting for Rerun is released.
+                if not copier.opened:
+                    copier.release()
+                copier.join(timeout=5.0)
+                if copier.is_alive() and copier.opened:
+                    copier.join()
+    if copier is not None and copier.error is not None:
+        exc = copier.error
+        why = ("no space left on the device" if exc.errno == errno.ENOSPC
+               else exc.strerror or str(exc))
+        raise UserError(f"cannot write the recording {path}: {why}")
+    tail = copier.tail if copier is not None else _tail(tmp)
+    if tail[-12:-4] != _RRD_FOOTER:
+        raise UserError(f"cannot write the recording {path}: it was left incomplete")
+
+
+def _tail(path: Path) -> bytes:
+    try:
+        with open(path, "rb") as handle:
+            handle.seek(max(path.stat().st_size - 16, 0))
+            return handle.read()
+    except OSError:
+        return b""
 
 
 def entity_name(image_name: str) -> str:

@@ -26,9 +26,10 @@ import hashlib
 import json
 import os
 import platform
+import re
 import shutil
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from importlib.metadata import PackageNotFoundError, version
@@ -86,6 +87,53 @@ def file_digest(path: Path | str) -> str:
     with Path(path).open("rb") as handle:
         while chunk := handle.read(1 << 20):
             digest.update(chunk)
+    return digest.hexdigest()[:16]
+
+
+_SIGNED_SPAN = 1 << 20
+"""Bytes read from each end of a file for its signature: the whole of a file up to 2 MiB."""
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+_signature_memo: dict[tuple[str, int, int, int], str] = {}
+
+
+def _file_signature(path: Path) -> str:
+    st = path.stat()
+    key = (str(path.resolve()), st.st_size, st.st_mtime_ns, st.st_ino)
+    if (memo := _signature_memo.get(key)) is not None:
+        return memo
+    digest = hashlib.sha256(str(st.st_size).encode())
+    with path.open("rb") as handle:
+        head = handle.read(_SIGNED_SPAN)
+        if head.startswith(_SQLITE_MAGIC):
+            # SQLite bumps its file change counter (header bytes 24-27, and 92-95 with it) in
+            # every write transaction, and COLMAP opens even a database it only reads with one:
+            # the counter is not content.
+            head = head[:24] + bytes(4) + head[28:92] + bytes(4) + head[96:]
+        digest.update(head)
+        if st.st_size > 2 * _SIGNED_SPAN:
+            handle.seek(st.st_size - _SIGNED_SPAN)
+        digest.update(handle.read(_SIGNED_SPAN))
+    _signature_memo[key] = digest.hexdigest()[:16]
+    return _signature_memo[key]
+
+
+def output_signature(path: Path | str) -> str | None:
+    """A cheap content signature of a step's output, recorded in run.json: per file its size
+    and the SHA-256 of its first and last MiB (all of it up to 2 MiB); a folder's combines its
+    files' relative names and signatures. None when ``path`` does not exist.
+
+    Truncation, an append, a replaced or deleted file all change it; mtimes do not enter it, so
+    a copied workspace (``cp -r``) keeps its steps. The hash of a file is remembered per process
+    for its (size, mtime, inode), so checking an unchanged folder costs only ``stat`` calls.
+    """
+    path = Path(path)
+    if path.is_file():
+        return _file_signature(path)
+    if not path.is_dir():
+        return None
+    digest = hashlib.sha256(b"folder")
+    for file in sorted(p for p in path.rglob("*") if p.is_file()):
+        digest.update(f"{file.relative_to(path).as_posix()}\0{_file_signature(file)}\0".encode())
     return digest.hexdigest()[:16]
 
 
@@ -161,10 +209,128 @@ def atomic_output(target: Path, *, seed_from: Path | None = None) -> Iterator[Pa
                 os.replace(tmp_sidecar, sidecar)
 
 
+LOCK_NAME = ".mocap.lock"
+"""The workspace lock file: it exists while a `mocap` process writes the workspace and holds
+that process's PID and command (for the message another writer gets)."""
+
+_held_locks: dict[Path, int] = {}
+"""Workspaces this process has locked, by resolved path, and how many times (re-entrant)."""
+
+
+@contextlib.contextmanager
+def workspace_lock(root: Path | str, purpose: str) -> Iterator[None]:
+    """Hold the workspace at ``root`` for writing; another process that tries is refused in
+    one line (a :class:`UserError` naming the holder's PID and command), and so is a workspace
+    that cannot be written (read-only).
+
+    The lock is ``flock`` on ``root/.mocap.lock``: the kernel releases it when its process
+    ends, kill -9 included, so a dead run never blocks the next one. The file is removed on
+    release. Taking the lock sweeps away the temporaries killed runs left (partial files, their
+    SQLite sidecars, scratch folders): no other run can be writing them. Re-entrant within a
+    process. A folder made only to hold the lock is removed again when nothing else was
+    written into it (bad input leaves no empty workspace behind).
+    """
+    root = Path(root)
+    key = root.resolve()
+    if key in _held_locks:
+        _held_locks[key] += 1
+        try:
+            yield
+        finally:
+            _held_locks[key] -= 1
+        return
+    if root.exists() and not root.is_dir():
+        yield  # not a workspace: the command says so in its own words
+        return
+    made = [parent for parent in (root, *root.parents) if not parent.exists()]
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        handle = _locked_file(root / LOCK_NAME, root)
+    except BaseException:
+        _remove_made(made)
+        raise
+    try:
+        handle.truncate(0)
+        handle.write(f"pid {os.getpid()}: {purpose} (since "
+                     f"{datetime.now().isoformat(timespec='seconds')})\n")
+        handle.flush()
+        _held_locks[key] = 1
+        _sweep_temporaries(root)
+        yield
+    finally:
+        _held_locks.pop(key, None)
+        with contextlib.suppress(OSError):
+            (root / LOCK_NAME).unlink()
+        handle.close()  # releases the flock
+        _remove_made(made)
+
+
+def _locked_file(path: Path, root: Path) -> Any:
+    import errno
+    import fcntl
+
+    while True:
+        try:
+            handle = path.open("a+")
+        except OSError as exc:
+            if exc.errno in (errno.EROFS, errno.EACCES, errno.EPERM):
+                raise UserError(
+                    f"workspace {root} is not writable ({exc.strerror}); a step writes its "
+                    f"outputs there: copy it to a writable folder (cp -r) and run there"
+                ) from None
+            if exc.errno == errno.ENOSPC:
+                raise UserError(f"no space left on the device of {root}") from None
+            raise
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            handle.seek(0)
+            holder = handle.read().strip() or "another process"
+            handle.close()
+            raise UserError(
+                f"workspace {root} is in use by another mocap run ({holder}); wait for it "
+                f"to finish: two runs writing one workspace would mix their outputs"
+            ) from None
+        # The holder before us may have removed the file on release after we opened it: then
+        # we hold a lock on a name that no longer exists. Lock the file that is there.
+        try:
+            if os.stat(path).st_ino == os.fstat(handle.fileno()).st_ino:
+                return handle
+        except FileNotFoundError:
+            pass
+        handle.close()
+
+
+_INPUT_FOLDERS = ("images", "videos")
+_TEMPORARY = re.compile(r"\.partial(\.|-|$)|\.old$|^\.dense-")
+"""Names of temporaries: :func:`partial_path` files and folders with SQLite's sidecars, the
+old folder :func:`atomic_output` swaps out, the dense step's scratch folders."""
+
+
+def _sweep_temporaries(root: Path) -> list[Path]:
+    """Remove what killed runs left in the workspace (in it and its output folders, never in
+    the input folders): with the lock held, no other run can be writing them."""
+    folders = [root, *(p for p in root.iterdir()
+                       if p.is_dir() and not p.is_symlink() and p.name not in _INPUT_FOLDERS)]
+    swept = [p for folder in folders for p in folder.iterdir() if _TEMPORARY.search(p.name)]
+    for path in swept:
+        _remove(path)
+    return swept
+
+
+def _remove_made(made: list[Path]) -> None:
+    """Remove the folders in ``made`` (deepest first) that are empty."""
+    for folder in made:
+        with contextlib.suppress(OSError):
+            folder.rmdir()
+
+
 @dataclass(frozen=True)
 class StepRecord:
     name: str
     fingerprint: str
+    """What later steps chain their fingerprints on: this step's settings and inputs, and the
+    content signatures of what it wrote."""
     seconds: float
     config: dict[str, Any]
     summary: dict[str, Any]
@@ -355,18 +521,20 @@ class Workspace:
         if not branch.images_dir.exists():
             os.symlink(os.path.relpath(self.images_dir.resolve(), branch.root.resolve()),
                        branch.images_dir)
-        records = {name: self.read_run().get("steps", {}).get(name) for name in steps}
-        missing = [name for name, rec in records.items() if rec is None]
+        run = self.read_run()
+        missing = [name for name in steps if self.step(name) is None]
         if missing:
             raise UserError(f"{self.root}: step(s) {', '.join(missing)} not run yet")
+        records = {name: run["steps"][name] for name in steps}
         mine = branch.read_run()
-        if any(mine.get("steps", {}).get(n) != records[n] for n in steps) or not (
-            branch.database_path.exists()
-        ):
+        if any(mine.get("steps", {}).get(n) != records[n] or branch.step(n) is None
+               for n in steps):
             with atomic_output(branch.database_path, seed_from=self.database_path):
                 pass
-            mine = {"format": RUN_FORMAT, "branch_of": str(self.root), "steps": records}
-            branch._write_run(mine)
+            signed = {rel: run["outputs"][rel] for rec in records.values()
+                      for rel in rec["outputs"]}
+            branch._write_run({"format": RUN_FORMAT, "branch_of": str(self.root),
+                               "steps": records, "outputs": signed})
         return branch
 
     def image_names(self) -> list[str]:
@@ -396,17 +564,66 @@ class Workspace:
         write_json_atomic(self.run_json, run)
 
     def step(self, name: str) -> StepRecord | None:
-        rec = self.read_run().get("steps", {}).get(name)
-        if rec is None:
+        """The record of step ``name`` when its outputs are as it left them, else None.
+
+        A record is trusted only while every output it lists has the content signature last
+        recorded for it (:func:`output_signature`): a truncated, edited or deleted output makes
+        the step count as not run, so it is recomputed and the steps after it too (issue 23).
+        """
+        run = self.read_run()
+        rec = run.get("steps", {}).get(name)
+        if rec is None or self._changed(run, rec):
             return None
-        return StepRecord(name, rec["fingerprint"], rec["seconds"], rec["config"], rec["summary"])
+        return StepRecord(name, rec["content"], rec["seconds"], rec["config"], rec["summary"])
+
+    def require_step(self, name: str, missing: str, rerun: str) -> StepRecord:
+        """The trusted record of step ``name``, else a one-line error: ``missing`` when it has
+        not run, or which of its outputs changed since it wrote them and ``rerun`` to redo it."""
+        if (record := self.step(name)) is not None:
+            return record
+        if changed := self.changed_outputs(name):
+            what = ("was recorded by an older mocap" if changed == [self.run_json.name]
+                    else f"changed since it wrote {', '.join(changed)}")
+            raise UserError(f"{self.root}: the {name} step {what}; run `{rerun}` again")
+        raise UserError(f"{self.root}: {missing}")
+
+    def changed_outputs(self, name: str) -> list[str]:
+        """The outputs of step ``name`` that differ from what it recorded (workspace-relative
+        names; a record from before signatures lists ``run.json``), for messages."""
+        run = self.read_run()
+        rec = run.get("steps", {}).get(name)
+        return [] if rec is None else self._changed(run, rec)
+
+    def _changed(self, run: dict[str, Any], rec: dict[str, Any]) -> list[str]:
+        if "content" not in rec:
+            return [self.run_json.name]  # recorded before outputs were signed: recompute
+        signed = run.get("outputs", {})
+        return [rel for rel in rec["outputs"]
+                if output_signature(self._resolve(rel)) != signed.get(rel)]
+
+    def _relative(self, path: Path) -> str:
+        path = Path(path)
+        if not path.is_absolute():
+            path = Path.cwd() / path
+        root = self.root if self.root.is_absolute() else Path.cwd() / self.root
+        try:
+            return path.relative_to(root).as_posix()
+        except ValueError:
+            return str(path)
+
+    def _resolve(self, rel: str) -> Path:
+        return Path(rel) if Path(rel).is_absolute() else self.root / rel
 
     def is_done(self, name: str, step_fingerprint: str, *outputs: Path) -> bool:
-        rec = self.step(name)
+        """Whether step ``name`` ran with this fingerprint and left ``outputs`` (every one of
+        them signed by its record, and unchanged since)."""
+        run = self.read_run()
+        rec = run.get("steps", {}).get(name)
         return (
             rec is not None
-            and rec.fingerprint == _versioned(name, step_fingerprint)
-            and all(p.exists() for p in outputs)
+            and rec["fingerprint"] == _versioned(name, step_fingerprint)
+            and not self._changed(run, rec)
+            and all(self._relative(p) in rec["outputs"] for p in outputs)
         )
 
     def reusable(self, name: str, step_fingerprint: str, *outputs: Path,
@@ -421,21 +638,57 @@ class Workspace:
         name: str,
         step_fingerprint: str,
         *,
+        outputs: Sequence[Path] = (),
+        updated: Sequence[Path] = (),
         config: dict[str, Any],
         seconds: float,
         summary: dict[str, Any] | None = None,
     ) -> StepRecord:
+        """Record a finished step: its fingerprint, settings, time, summary, and the content
+        signature of each file or folder it wrote (which must exist).
+
+        ``outputs`` were written anew, ``updated`` were changed in place (the COLMAP database,
+        by matching and intrinsics). Other steps' records of the same files lose their content
+        with them, so they are dropped: every other record of a new output, and the records of
+        an updated one made after this step's previous record (they worked on the output this
+        step has just replaced; none when it has none). The steps before it keep theirs: an
+        update builds on them.
+        """
         step_fingerprint = _versioned(name, step_fingerprint)
         run = self.read_run()
-        run.setdefault("steps", {})[name] = {
+        steps = run.setdefault("steps", {})
+        signed = run.setdefault("outputs", {})
+        # An updating step run for the first time built on every record there is.
+        previous = steps.get(name, {}).get("sequence", float("inf"))
+        sequence = 1 + max((rec.get("sequence", -1) for rec in steps.values()), default=-1)
+        names = []
+        for path, fresh in [(p, True) for p in outputs] + [(p, False) for p in updated]:
+            signature = output_signature(path)
+            if signature is None:
+                raise FileNotFoundError(f"step {name}: its output {path} does not exist")
+            rel = self._relative(path)
+            names.append(rel)
+            signed[rel] = signature
+            for other in [n for n, rec in steps.items() if n != name
+                          and rel in rec.get("outputs", ())
+                          and (fresh or rec.get("sequence", -1) > previous)]:
+                del steps[other]
+        # What the steps after it chain on: its settings and what it wrote, so that a step
+        # recomputed to other content (COLMAP's matching is not deterministic) is not built on
+        # by results of the old content.
+        content = fingerprint(step_fingerprint, {rel: signed[rel] for rel in names})
+        steps[name] = {
             "fingerprint": step_fingerprint,
+            "content": content,
             "seconds": round(seconds, 3),
             "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "config": config,
             "summary": summary or {},
+            "outputs": names,
+            "sequence": sequence,
         }
         self._write_run(run)
-        return StepRecord(name, step_fingerprint, seconds, config, summary or {})
+        return StepRecord(name, content, seconds, config, summary or {})
 
 
 class Timer:

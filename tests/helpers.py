@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -107,3 +109,32 @@ def recording_entities(path: Path) -> set[str]:
         [rerun, "rrd", "print", "-v", path], capture_output=True, text=True, check=True
     ).stdout
     return set(re.findall(r"(/[\w/-]*@\w+:\w+)", out))
+
+
+def mount_small_disk(folder: Path, size_bytes: int) -> Path:
+    """Mount a tmpfs of ``size_bytes`` at ``folder`` (made if missing): a disk that fills up.
+    Skips the calling test with the reason when not root or the mount is refused (a container
+    without CAP_SYS_ADMIN). Undo with :func:`unmount_small_disk`."""
+    if os.geteuid() != 0:
+        pytest.skip("a full disk is simulated with a tmpfs mount, which needs root")
+    folder.mkdir(parents=True, exist_ok=True)
+    size = f"size={max(size_bytes // 1024, 4)}k"
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", size, "tmpfs", str(folder)],
+                      capture_output=True).returncode != 0:
+        pytest.skip("cannot mount a tmpfs (a container without CAP_SYS_ADMIN?)")
+    return folder
+
+
+def unmount_small_disk(folder: Path) -> None:
+    if os.path.ismount(folder):
+        subprocess.run(["umount", "-l", str(folder)], capture_output=True)
+
+
+@contextlib.contextmanager
+def small_disk(folder: Path, size_bytes: int) -> Iterator[Path]:
+    """:func:`mount_small_disk` for the duration of a block."""
+    mount_small_disk(folder, size_bytes)
+    try:
+        yield folder
+    finally:
+        unmount_small_disk(folder)

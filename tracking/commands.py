@@ -102,6 +102,9 @@ class TrackCommand:
               f"{summary['height_m']:.2f} m")
         if summary["lost"]:
             print(f"lost       frames {summary['lost']}")
+            print(f"warning: the subject was lost in {len(summary['lost'])} of "
+                  f"{summary['frames']} frames (see the events above): tracks/pose.json has no "
+                  "pose for them and motion.bvh repeats the last tracked one", file=sys.stderr)
         for frame, event in summary.get("events", {}).items():
             print(f"frame {frame:>5}: {event}")
         print(f"outputs    {ws.tracks_dir}/joints.csv, pose.json, motion.bvh; "

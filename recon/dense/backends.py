@@ -79,6 +79,12 @@ def stereo_pair_depths(pair: tuple[int, int], views: Sequence[Any], config: Any)
     return depths_from_pair(views[ref], views[src], config, ref_index=ref, src_index=src)
 
 
+MAX_PAIRS_PER_VIEW = 8
+"""Most stereo partners a view may have. Each pair keeps two float depth maps of the
+undistorted size in memory until fusion (15 MB a pair at 1600x1200), and partners beyond the
+nearest few see the surface at grazing angles that the fusion rejects anyway."""
+
+
 class CpuStereoBackend(Plugin):
     description = ("rectified stereo on the CPU: neighbour pairs, OpenCV SGBM with a left-right "
                    "check, multi-view depth consistency, fused with normals")
@@ -86,14 +92,28 @@ class CpuStereoBackend(Plugin):
     @dataclass(frozen=True, kw_only=True)
     class Options:
         max_pairs_per_view: int = field(
-            default=2, metadata={"help": "stereo partners per view"})
+            default=2, metadata={"help": f"stereo partners per view, 1-{MAX_PAIRS_PER_VIEW} "
+                                 "(each adds two depth maps per view, held in memory until "
+                                 "fusion)"})
         min_consistent_views: int = field(
             # 1 (besides the stereo partner) was measured on the demo scene: F-score 0.906 ->
             # 0.920 at 1% of the extent, precision 1.000 and accuracy (8.5-8.7 mm) unchanged.
             default=1, metadata={"help": "views other than the stereo partner whose depth must "
-                                 "agree with a point (lowered when there are too few views)"})
+                                 "agree with a point, >= 0 (lowered when there are too few "
+                                 "views)"})
         rel_depth_tol: float = field(
-            default=0.01, metadata={"help": "relative depth agreement between views"})
+            default=0.01, metadata={"help": "relative depth agreement between views, in (0, 1)"})
+
+        def __post_init__(self) -> None:
+            # Checked here, when the backend is made (before any work), not deep in stereo.
+            if not 1 <= self.max_pairs_per_view <= MAX_PAIRS_PER_VIEW:
+                raise ValueError(f"max_pairs_per_view must be in 1..{MAX_PAIRS_PER_VIEW}, got "
+                                 f"{self.max_pairs_per_view}")
+            if self.min_consistent_views < 0:
+                raise ValueError(
+                    f"min_consistent_views must be >= 0, got {self.min_consistent_views}")
+            if not 0 < self.rel_depth_tol < 1:  # NaN fails too
+                raise ValueError(f"rel_depth_tol must be in (0, 1), got {self.rel_depth_tol}")
 
     def densify(self, context: DenseContext) -> DenseResult:
         from recon.dense.fusion import FusionConfig, filter_consistent, fuse

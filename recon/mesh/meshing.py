@@ -43,9 +43,11 @@ keeps the world frame as it is (glTF viewers assume +Y up, so the model may lie 
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
+import shutil
 import struct
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -56,6 +58,7 @@ import open3d as o3d
 import pymeshlab
 from scipy.spatial import cKDTree
 
+from recon.dense.ply import PlyError, check_ply, quiet_stderr
 from recon.errors import UserError
 from recon.mesh.normals import vertex_normals
 from recon.workspace import partial_path
@@ -486,6 +489,8 @@ def _write_glb(path: Path, mesh: o3d.geometry.TriangleMesh) -> None:
         f.write(json_chunk)
         f.write(struct.pack("<I4s", len(binary), b"BIN\x00"))
         f.write(binary)
+    if os.path.getsize(path) != total:  # written in full (a full disk raises, or cuts it short)
+        raise OSError(errno.EIO, f"{path} is incomplete")
 
 
 def _write_obj(path: Path, mesh: o3d.geometry.TriangleMesh) -> None:
@@ -505,16 +510,25 @@ def _write_obj(path: Path, mesh: o3d.geometry.TriangleMesh) -> None:
 
 
 def _write_ply(path: Path, mesh: o3d.geometry.TriangleMesh) -> None:
-    ok = o3d.io.write_triangle_mesh(
-        str(path),
-        mesh,
-        write_ascii=False,
-        write_vertex_normals=mesh.has_vertex_normals(),
-        write_vertex_colors=mesh.has_vertex_colors(),
-        write_triangle_uvs=False,
-    )
+    # Open3D's writer (RPly) reports success when its writes fail, printing a line for each
+    # value (issue 23): silence it and check the file's header and size instead.
+    with quiet_stderr():
+        ok = o3d.io.write_triangle_mesh(
+            str(path),
+            mesh,
+            write_ascii=False,
+            write_vertex_normals=mesh.has_vertex_normals(),
+            write_vertex_colors=mesh.has_vertex_colors(),
+            write_triangle_uvs=False,
+        )
     if not ok:
-        raise OSError(f"Open3D could not write {path}")
+        raise OSError(errno.EIO, f"Open3D could not write {path}")
+    try:
+        check_ply(path, vertices=len(mesh.vertices), faces=len(mesh.triangles))
+    except PlyError as exc:
+        free = shutil.disk_usage(path.parent).free
+        raise OSError(errno.ENOSPC if free < 1 << 20 else errno.EIO,
+                      f"{path} is incomplete ({exc})") from None
 
 
 _WRITERS: dict[str, Callable[[Path, o3d.geometry.TriangleMesh], None]] = {
@@ -525,15 +539,21 @@ _WRITERS: dict[str, Callable[[Path, o3d.geometry.TriangleMesh], None]] = {
 
 
 def write_mesh(
-    mesh: o3d.geometry.TriangleMesh, path_ply: Path, *, also: Sequence[str] = (".obj", ".glb")
+    mesh: o3d.geometry.TriangleMesh,
+    path_ply: Path,
+    *,
+    also: Sequence[str] = (".obj", ".glb"),
+    before_replace: Callable[[], None] | None = None,
 ) -> list[Path]:
     """Write ``mesh`` to ``path_ply`` and to siblings with the suffixes in ``also``; atomically.
 
     Every file is first written as ``<stem>.partial<suffix>`` beside its target, and only when
     all are complete are they renamed into place, so a failure leaves no new file and no
     ``.partial`` file, and existing targets untouched. Returns the written paths, ``.ply``
-    first. Formats: see the module docstring. Raises :class:`MeshingError` for a mesh with no
-    faces, ``ValueError`` for an unknown suffix, ``OSError`` when a file cannot be written.
+    first. ``before_replace`` runs when every file is written and checked, before any target
+    is replaced; when it raises, nothing is replaced either. Formats: see the module docstring.
+    Raises :class:`MeshingError` for a mesh with no faces, ``ValueError`` for an unknown suffix,
+    ``OSError`` when a file cannot be written (or is found incomplete after writing).
     """
     path_ply = Path(path_ply)
     if path_ply.suffix.lower() != ".ply":
@@ -550,6 +570,8 @@ def write_mesh(
     try:
         for target, partial in zip(targets, partials, strict=True):
             _WRITERS[target.suffix](partial, mesh)
+        if before_replace is not None:
+            before_replace()
         for target, partial in zip(targets, partials, strict=True):
             os.replace(partial, target)
     except BaseException:

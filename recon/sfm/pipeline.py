@@ -17,11 +17,12 @@ fingerprints of the steps it reads) matches the one recorded in ``run.json``.
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import importlib
 import shutil
 from collections import defaultdict
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -248,12 +249,19 @@ def extract_features(
             num_images = database.num_images()
             num_keypoints = database.num_keypoints()
             num_cameras = database.num_cameras()
+            read = {image.name for image in database.read_all_images()}
         if num_images != len(names):
-            raise UserError(f"COLMAP read {num_images} of {len(names)} images in {ws.images_dir}")
+            # COLMAP says which only in a WARNING line, hidden by default: name them here.
+            unread = [name for name in names if name not in read]
+            shown = ", ".join(unread[:5]) + (f" and {len(unread) - 5} more"
+                                             if len(unread) > 5 else "")
+            raise UserError(f"COLMAP could not read {len(unread)} of {len(names)} images in "
+                            f"{ws.images_dir}: {shown} (convert them to JPEG or PNG)")
     _record(recordings, _log_features, ws, _feature_rows(ws.database_path))
     return ws.record_step(
         "features",
         fp,
+        outputs=[ws.database_path],
         config=settings | {"images": len(names)},
         seconds=timer.seconds,
         summary={"images": num_images, "cameras": num_cameras, "keypoints": num_keypoints},
@@ -376,9 +384,8 @@ def match_features(
     ws: Workspace, config: SfMConfig, *, overwrite: bool = False,
     recordings: DeferredRecordings | None = None,
 ) -> StepRecord:
-    upstream = ws.step("features")
-    if upstream is None or not ws.database_path.exists():
-        raise UserError(f"{ws.root}: no features yet; run `mocap sfm {ws.root}`")
+    upstream = ws.require_step("features", f"no features yet; run `mocap sfm {ws.root}`",
+                               f"mocap sfm {ws.root}")
     num_images = upstream.summary["images"]
     matcher = config.matcher
     if matcher is Matcher.AUTO:
@@ -418,6 +425,7 @@ def match_features(
     return ws.record_step(
         "matches",
         fp,
+        updated=[ws.database_path],
         config=settings,
         seconds=timer.seconds,
         summary={"pairs": len(pairs), "verified_pairs": len(verified)},
@@ -473,9 +481,8 @@ def initialise_intrinsics(
     ws: Workspace, config: SfMConfig, *, overwrite: bool = False,
     recordings: DeferredRecordings | None = None,
 ) -> StepRecord:
-    upstream = ws.step("matches")
-    if upstream is None:
-        raise UserError(f"{ws.root}: no matches yet; run `mocap sfm {ws.root}`")
+    upstream = ws.require_step("matches", f"no matches yet; run `mocap sfm {ws.root}`",
+                               f"mocap sfm {ws.root}")
     settings = {"intrinsics": config.intrinsics, "options": list(config.intrinsics_options)}
     fp = fingerprint("intrinsics", settings, upstream.fingerprint)
     if done := ws.reusable("intrinsics", fp, ws.database_path, overwrite=overwrite):
@@ -492,6 +499,7 @@ def initialise_intrinsics(
     return ws.record_step(
         "intrinsics",
         fp,
+        updated=[ws.database_path],
         config=settings,
         seconds=timer.seconds,
         summary={
@@ -547,9 +555,9 @@ def map_sparse(
     ws: Workspace, config: SfMConfig, *, overwrite: bool = False,
     recordings: DeferredRecordings | None = None,
 ) -> StepRecord:
-    upstream = ws.step("intrinsics")
-    if upstream is None:
-        raise UserError(f"{ws.root}: intrinsics not initialised; run `mocap sfm {ws.root}`")
+    upstream = ws.require_step(
+        "intrinsics", f"intrinsics not initialised; run `mocap sfm {ws.root}`",
+        f"mocap sfm {ws.root}")
     refine = config.refine_focal
     if refine is None:
         refine = upstream.summary["refine_focal"]
@@ -595,17 +603,16 @@ def map_sparse(
                 registrations += [1, 2]
                 progress.update(2)
             else:
-                models = pycolmap.incremental_mapping(
-                    ws.database_path, ws.images_dir, raw, options=options,
-                    next_image_callback=on_image,
-                )
+                with _colmap_errors_restated():
+                    models = pycolmap.incremental_mapping(
+                        ws.database_path, ws.images_dir, raw, options=options,
+                        next_image_callback=on_image,
+                    )
         finally:
             progress.close()
         if not models:
-            raise UserError(
-                f"mapping registered no images in {ws.root}: the photos do not overlap "
-                "enough (see logs/matches.rrd for verified pairs)"
-            )
+            raise UserError(f"mapping registered no images in {ws.root}: "
+                            f"{_why_no_model(ws.database_path)}")
         ordered = sorted(models.values(), key=lambda r: r.num_reg_images(), reverse=True)
         for index, model in enumerate(ordered):
             (out / str(index)).mkdir()
@@ -613,7 +620,57 @@ def map_sparse(
         shutil.rmtree(raw)
         summary = model_summary(ordered[0], num_images) | {"models": len(ordered)}
         _log_mapping(ws, ordered[0], registrations)
-    return ws.record_step("mapping", fp, config=settings, seconds=timer.seconds, summary=summary)
+    return ws.record_step("mapping", fp, outputs=[ws.model_dir], config=settings,
+                          seconds=timer.seconds, summary=summary)
+
+
+def _why_no_model(database_path: Path) -> str:
+    """Why mapping found no initial pair, from the verified pairs in the database."""
+    from recon.sfm.twoview import MIN_MEDIAN_PARALLAX_PX, median_parallax_px
+
+    with pycolmap.Database.open(database_path) as db:
+        pair_ids, geometries = db.read_two_view_geometries()
+        verified = [(pycolmap.pair_id_to_image_pair(pair_id), geometry)
+                    for pair_id, geometry in zip(pair_ids, geometries, strict=True)
+                    if len(geometry.inlier_matches) >= 15]
+        keypoints = {i: db.read_keypoints(i)[:, :2]
+                     for i in {i for pair, _ in verified for i in pair}}
+    if verified and all(
+        median_parallax_px(keypoints[i], keypoints[j], geometry.inlier_matches)
+        < MIN_MEDIAN_PARALLAX_PX
+        for (i, j), geometry in verified
+    ):
+        return ("the photos are copies of one view (their matches do not move): take them "
+                "from different places")
+    no_baseline = (pycolmap.TwoViewGeometryConfiguration.PANORAMIC,
+                   pycolmap.TwoViewGeometryConfiguration.PLANAR_OR_PANORAMIC)
+    if verified and all(geometry.config in no_baseline for _, geometry in verified):
+        return ("every matched pair fits a pure rotation or a plane: move the camera between "
+                "the photos (see logs/matches.rrd for verified pairs)")
+    return "the photos do not overlap enough (see logs/matches.rrd for verified pairs)"
+
+
+# glog severities, as pycolmap.logging.minloglevel takes them.
+_GLOG_ERROR, _GLOG_FATAL = 2, 3
+
+
+@contextlib.contextmanager
+def _colmap_errors_restated() -> Iterator[None]:
+    """COLMAP's ERROR lines hidden while a call runs whose failure we report in our own words
+    (mapping's "Failed to create any sparse model" before our one-line error).
+
+    Only at the CLI's quiet level (ERROR: `_quiet_colmap` in recon/cli.py): with ``-v``, or for a
+    library caller who left glog at its default, every COLMAP line still shows.
+    """
+    logging = pycolmap.logging
+    quiet = logging.minloglevel == _GLOG_ERROR
+    if quiet:
+        logging.minloglevel = _GLOG_FATAL
+    try:
+        yield
+    finally:
+        if quiet:
+            logging.minloglevel = _GLOG_ERROR
 
 
 def model_summary(model: pycolmap.Reconstruction, num_images: int) -> dict[str, Any]:

@@ -18,6 +18,9 @@ import pycolmap
 from recon.errors import UserError
 
 MAX_REPROJECTION_ERROR_PX = 4.0
+# Below this median displacement of the verified matches the photos are one view twice (the
+# same photo, or a copy re-encoded): the essential matrix is undefined and so is the pose.
+MIN_MEDIAN_PARALLAX_PX = 1.0
 
 
 def two_view_model(database_path: Path, images_dir: Path, *, refine_focal: bool
@@ -35,6 +38,15 @@ def two_view_model(database_path: Path, images_dir: Path, *, refine_focal: bool
         raise UserError(f"the two photos in {images_dir} share too few verified matches")
     geometry = usable[0]
     matches = np.asarray(geometry.inlier_matches, dtype=np.int64)
+    names = " and ".join(sorted(im.name for im in images))
+    parallax_px = median_parallax_px(keypoints[0], keypoints[1], matches)
+    if parallax_px < MIN_MEDIAN_PARALLAX_PX:
+        raise UserError(f"the photos {names} are identical (their matches move by "
+                        f"{parallax_px:.2f} px): take the second photo from another place")
+    if geometry.config == pycolmap.TwoViewGeometryConfiguration.PANORAMIC:
+        # COLMAP's verdict when the matches fit a rotation alone (tiny triangulation angles).
+        raise UserError(f"the camera only turned between {names} (no baseline to "
+                        "triangulate from): move it between the photos")
     cam1, cam2 = cameras[images[0].camera_id], cameras[images[1].camera_id]
     K1, K2 = cam1.calibration_matrix(), cam2.calibration_matrix()
     # COLMAP keypoints have pixel centres at +0.5, as do its calibration matrices: consistent.
@@ -47,6 +59,9 @@ def two_view_model(database_path: Path, images_dir: Path, *, refine_focal: bool
     # The cheirality test picks, of the four (R, t), the one with the points in front of both.
     _, R, t, mask = cv2.recoverPose(E, x1, x2, np.eye(3), mask=mask)
     keep = mask.ravel() > 0
+    if keep.sum() < 15:
+        raise UserError(f"too few matches of {names} fit one camera motion "
+                        f"({keep.sum()} of {len(matches)}); the photos may show no camera motion")
     P1 = np.hstack([np.eye(3), np.zeros((3, 1))])
     P2 = np.hstack([R, t.reshape(3, 1)])
     X = cv2.triangulatePoints(P1, P2, x1[keep].T, x2[keep].T)
@@ -83,6 +98,16 @@ def two_view_model(database_path: Path, images_dir: Path, *, refine_focal: bool
                                    np.zeros(3)))
     model.extract_colors_for_all_images(str(images_dir))
     return model
+
+
+def median_parallax_px(keypoints1: np.ndarray, keypoints2: np.ndarray,
+                       matches: np.ndarray) -> float:
+    """Median image distance (px) between matched keypoints ((N, 2) each; matches (M, 2))."""
+    matches = np.asarray(matches, dtype=np.int64).reshape(-1, 2)
+    if len(matches) == 0:
+        return float("nan")
+    return float(np.median(np.linalg.norm(
+        keypoints1[matches[:, 0], :2] - keypoints2[matches[:, 1], :2], axis=1)))
 
 
 def _normalised(points_px: np.ndarray, K: np.ndarray) -> np.ndarray:

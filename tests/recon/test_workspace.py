@@ -55,7 +55,8 @@ def test_create_again_with_same_images_reuses(tmp_path):
     src = tmp_path / "photos"
     _photos(src)
     ws, _ = Workspace.create(tmp_path / "ws", src)
-    ws.record_step("features", "abc", config={}, seconds=1.0)
+    ws.database_path.write_bytes(b"db")
+    ws.record_step("features", "abc", outputs=[ws.database_path], config={}, seconds=1.0)
     ws, notes = Workspace.create(tmp_path / "ws", src)
     assert any("reused" in n for n in notes)
     assert ws.step("features") is not None  # derived state kept
@@ -146,12 +147,96 @@ def test_steps_are_done_only_with_matching_fingerprint_and_outputs(tmp_path):
     out = tmp_path / "out.txt"
     fp = fingerprint("step", {"a": 1})
     assert fp == fingerprint("step", {"a": 1}) != fingerprint("step", {"a": 2})
-    ws.record_step("step", fp, config={"a": 1}, seconds=0.5, summary={"n": 3})
-    assert not ws.is_done("step", fp, out)  # output missing
+    with pytest.raises(FileNotFoundError):  # a step cannot record an output it did not write
+        ws.record_step("step", fp, outputs=[out], config={"a": 1}, seconds=0.5)
     out.write_text("x")
+    ws.record_step("step", fp, outputs=[out], config={"a": 1}, seconds=0.5, summary={"n": 3})
     assert ws.is_done("step", fp, out)
     assert not ws.is_done("step", fingerprint("step", {"a": 2}), out)
+    assert not ws.is_done("step", fp, out, tmp_path / "other.txt")  # not an output it signed
     assert ws.step("step").summary == {"n": 3}
+    out.unlink()
+    assert not ws.is_done("step", fp, out) and ws.step("step") is None
+
+
+def test_a_damaged_output_is_not_trusted_and_a_copied_workspace_is(tmp_path):
+    """Issue 23, point 3: reuse checked only that a file existed, so a truncated fused.ply was
+    meshed and 'reused'. Each output's content signature is recorded; a truncated, appended or
+    edited file, or a file deleted from an output folder, makes the step count as not run. A
+    copy of the workspace (new mtimes and inodes) keeps its steps."""
+    ws = Workspace(tmp_path / "ws")
+    cloud = ws.dense_cloud_path
+    cloud.parent.mkdir(parents=True)
+    cloud.write_bytes(bytes(range(256)) * 20000)  # 5 MB: signed by its ends and size
+    model = ws.model_dir
+    model.mkdir(parents=True)
+    for name in ("cameras.bin", "images.bin"):
+        (model / name).write_bytes(name.encode() * 100)
+    ws.record_step("mapping", "m", outputs=[model], config={}, seconds=0.1)
+    ws.record_step("dense", "d", outputs=[cloud], config={}, seconds=0.1)
+    assert ws.step("dense") and ws.step("mapping")
+
+    copy = Workspace(tmp_path / "copy")
+    shutil.copytree(ws.root, copy.root)  # copy2 keeps mtimes: touch them too
+    for path in copy.root.rglob("*"):
+        os.utime(path, (1, 1))
+    assert copy.reusable("dense", "d", copy.dense_cloud_path) is not None
+    assert copy.reusable("mapping", "m", copy.model_dir) is not None
+
+    with cloud.open("r+b") as handle:
+        handle.truncate(5_000_000 - 1)
+    assert ws.step("dense") is None and ws.reusable("dense", "d", cloud) is None
+    assert ws.changed_outputs("dense") == ["dense/fused.ply"]
+    (model / "images.bin").unlink()
+    assert ws.step("mapping") is None
+    assert copy.step("dense") and copy.step("mapping")  # the copy is its own
+
+
+def test_a_later_step_rewriting_a_shared_output_keeps_the_earlier_trusted(tmp_path):
+    """The database is the output of features, matches and intrinsics in turn: each record
+    trusts the signature the last writer left, so matches do not untrust features, while a
+    change behind every step's back untrusts all of them."""
+    ws = Workspace(tmp_path)
+    ws.database_path.write_bytes(b"features")
+    ws.record_step("features", "f", outputs=[ws.database_path], config={}, seconds=0.1)
+    ws.database_path.write_bytes(b"features+matches")
+    ws.record_step("matches", "m", updated=[ws.database_path], config={}, seconds=0.1)
+    ws.database_path.write_bytes(b"features+matches+intrinsics")
+    ws.record_step("intrinsics", "i", updated=[ws.database_path], config={}, seconds=0.1)
+    assert ws.step("features") and ws.step("matches") and ws.step("intrinsics")
+    ws.database_path.write_bytes(b"damaged")
+    assert not (ws.step("features") or ws.step("matches") or ws.step("intrinsics"))
+
+
+def test_a_step_that_rewrites_a_shared_output_drops_the_records_built_on_it(tmp_path):
+    """Issue 23: after a damaged database, features recomputed a fresh one and matching was
+    'reused' with no matches in it. A step that writes a file anew drops the other records of
+    it; one that updates it in place drops those made after its own previous record."""
+    ws = Workspace(tmp_path)
+    db = ws.database_path
+    db.write_bytes(b"f")
+    ws.record_step("features", "f", outputs=[db], config={}, seconds=0.1)
+    db.write_bytes(b"fm")
+    ws.record_step("matches", "m", updated=[db], config={}, seconds=0.1)
+    db.write_bytes(b"fmi")
+    ws.record_step("intrinsics", "i", updated=[db], config={}, seconds=0.1)
+    db.write_bytes(b"fm2")  # matching again (another matcher): intrinsics worked on the old
+    ws.record_step("matches", "m2", updated=[db], config={}, seconds=0.1)
+    assert ws.step("features") and ws.step("matches") and ws.step("intrinsics") is None
+    db.write_bytes(b"f2")  # features anew: nothing built on the old database survives
+    ws.record_step("features", "f", outputs=[db], config={}, seconds=0.1)
+    assert ws.step("features") and ws.step("matches") is None
+    assert not ws.is_done("matches", "m2", db)
+
+
+def test_a_record_from_before_signatures_is_recomputed(tmp_path):
+    ws = Workspace(tmp_path)
+    (tmp_path / "out.txt").write_text("x")
+    ws.record_step("step", "fp", outputs=[tmp_path / "out.txt"], config={}, seconds=0.1)
+    run = json.loads(ws.run_json.read_text())
+    del run["steps"]["step"]["content"], run["steps"]["step"]["outputs"]
+    ws.run_json.write_text(json.dumps(run))
+    assert ws.step("step") is None and not ws.is_done("step", "fp", tmp_path / "out.txt")
 
 
 def test_a_new_step_version_is_not_reused_and_changes_what_follows(tmp_path, monkeypatch):
@@ -161,12 +246,12 @@ def test_a_new_step_version_is_not_reused_and_changes_what_follows(tmp_path, mon
     out = tmp_path / "out.txt"
     out.write_text("x")
     fp = fingerprint("step", {"a": 1})
-    ws.record_step("step", fp, config={}, seconds=0.1)
+    ws.record_step("step", fp, outputs=[out], config={}, seconds=0.1)
     old_upstream = ws.step("step").fingerprint
     assert ws.is_done("step", fp, out)
     monkeypatch.setitem(workspace_module.STEP_VERSIONS, "step", 2)
     assert not ws.is_done("step", fp, out) and ws.reusable("step", fp, out) is None
-    ws.record_step("step", fp, config={}, seconds=0.1)
+    ws.record_step("step", fp, outputs=[out], config={}, seconds=0.1)
     assert ws.is_done("step", fp, out) and ws.step("step").fingerprint != old_upstream
 
 

@@ -92,6 +92,7 @@ def test_tracking_sequences_on_dask_equal_a_serial_run(cluster, tmp_path):
     assert skipped.steps[0].reason == "not a photo workspace (it has cameras.json)"
 
 
+@pytest.mark.slow  # its path is covered faster elsewhere (make test's 10-minute budget)
 def test_silhouettes_per_camera_and_frames_on_dask_equal_a_serial_run(cluster, tmp_path):
     """A real-video workspace: a task per camera's background model, then a task per run of
     frames of each camera, then a task per run of frames for the multi-view check, give the

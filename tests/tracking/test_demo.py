@@ -32,6 +32,7 @@ def test_demo_flags_are_the_photo_demos_and_the_new_ones():
     assert isinstance(DemoCommand(), Command)
 
 
+@pytest.mark.slow  # its path is covered faster elsewhere (make test's 10-minute budget)
 def test_capture_part_of_the_demo_scores_against_the_truth(tmp_path: Path):
     """The demo's synthetic walk, filmed and captured (what `test_capture.py` checks step by
     step); here: the demo's scores, files and lines, and a second run that reuses it all."""

@@ -163,7 +163,22 @@ def parse_bvh(text: str, source: str = "<string>") -> Motion:
     joints = _parse_hierarchy(_tokens_with_lines(lines[:motion_line]), source, motion_line + 1)
     num_channels = sum(len(j.channels) for j in joints)
     frame_time_s, channels = _parse_motion(lines, motion_line, num_channels, source)
+    names = [(j.name, c) for j in joints for c in j.channels]
+    rotation = np.array([c in ROTATION_CHANNELS for _, c in names], dtype=bool)
+    wild = np.abs(channels[:, rotation]) > MAX_ROTATION_DEG
+    if wild.any():
+        frame, column = np.argwhere(wild)[0]
+        joint, channel = np.array(names, dtype=object)[rotation][column]
+        raise ValueError(f"{source}: frame {frame}: {channel} of {joint} is "
+                         f"{channels[frame, rotation][column]:g} degrees, beyond the "
+                         f"+-{MAX_ROTATION_DEG:g} of any joint angle")
     return Motion(joints=tuple(joints), frame_time_s=frame_time_s, channels=channels)
+
+
+MAX_ROTATION_DEG: float = 1e6
+"""Largest |rotation channel| of a BVH frame, degrees: almost 2,800 turns, more than any
+unwrapped angle of a real clip, where float64 still resolves 1e-10 degrees; beyond it a value
+is garbage whose rotation (its remainder modulo 360) means nothing."""
 
 
 def _parse_hierarchy(tokens: list[tuple[str, int]], source: str, end_line: int) -> list[Joint]:

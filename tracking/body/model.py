@@ -156,6 +156,42 @@ _ROT_ROWS_OF_NODE: tuple[tuple[int, ...], ...] = tuple(
 )
 
 
+LIMIT_TOLERANCE_RAD: float = 1e-3 * _DEG
+"""How far past a joint limit a stored pose may lie (0.001 degree) before it is refused. The
+tracker, the body fit and the retargeting clip every pose to the limits exactly, and a pose
+that went through text (BVH, 8 decimals of a degree) is off by far less than this; a pose
+outside by more did not come from this model."""
+ROOT_TRANSLATION_BOUND_M: float = 1000.0
+"""Largest |root translation| (each axis, metres) a stored pose may have: ten times the largest
+capture area there is (a sports field, ~100 m), so a pelvis beyond it is garbage, not a
+subject (it also keeps forward kinematics far from float overflow)."""
+
+
+def pose_params_problem(params: np.ndarray, *, joint_limits: bool = True) -> str | None:
+    """Why the stored parameters (24,) are not a pose of this model, or None when they are:
+    a value that is not finite, a root translation beyond `ROOT_TRANSLATION_BOUND_M`, or (with
+    ``joint_limits``) a value more than `LIMIT_TOLERANCE_RAD` outside its `POSE_LAYOUT` range.
+    The text names the first such parameter, its value and its range, in its units (degrees
+    for rotations)."""
+    params = np.asarray(params, dtype=float)
+    if params.shape != (N_POSE_PARAMS,):
+        return f"{params.size} pose parameters, not {N_POSE_PARAMS}"
+    for i, (p, value) in enumerate(zip(POSE_LAYOUT, params, strict=True)):
+        degrees = p.unit == "rad"
+        shown = f"{np.rad2deg(value):.6g} deg" if degrees else f"{value:.6g} m"
+        if not np.isfinite(value):
+            return f"{p.name} is {value} (not a finite number)"
+        if p.kind == "translation" and abs(value) > ROOT_TRANSLATION_BOUND_M:
+            return (f"{p.name} = {shown} is beyond the +-{ROOT_TRANSLATION_BOUND_M:g} m of any "
+                    "capture volume")
+        if joint_limits and not (LOWER_LIMITS[i] - LIMIT_TOLERANCE_RAD <= value
+                                 <= UPPER_LIMITS[i] + LIMIT_TOLERANCE_RAD):
+            lo, hi = np.rad2deg([LOWER_LIMITS[i], UPPER_LIMITS[i]])
+            return (f"{p.name} = {shown} is outside its joint limits {lo:g}..{hi:g} deg "
+                    f"(tolerance {np.rad2deg(LIMIT_TOLERANCE_RAD):g} deg)")
+    return None
+
+
 @dataclass(frozen=True)
 class LimitViolation:
     """A parameter outside its anatomical range; `excess` = distance to the range, > 0."""

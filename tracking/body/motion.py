@@ -22,6 +22,8 @@ pose, with the fit's own fields alongside) are all in it, and it is what `mocap 
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import json
 from dataclasses import replace
 from pathlib import Path
@@ -38,13 +40,16 @@ from tracking.body.bvh import (
     rotations_to_channels,
 )
 from tracking.body.model import (
+    LOWER_LIMITS,
     NODE_NAMES,
     NODE_PARENTS,
     PARAM_INDEX,
     POSE_LAYOUT,
+    UPPER_LIMITS,
     BodyShape,
     Pose,
     parent_from_node_transforms,
+    pose_params_problem,
     rest_offsets,
 )
 
@@ -147,12 +152,33 @@ def poses_from_motion(motion: Motion) -> tuple[list[Pose], BodyShape]:
         owned = [i for i, p in enumerate(POSE_LAYOUT) if p.joint == name and p.kind == "rotation"]
         if not owned:
             continue
-        zxy = np.deg2rad(rotations_to_channels(rotations[:, k], "ZXY"))
         if len(owned) == 3:  # ball joint: its parameters are the ZXY angles themselves
-            params[:, owned] = zxy
-        else:  # hinge about +-X: the X angle, signed by the axis
-            params[:, owned[0]] = zxy[:, 1] * POSE_LAYOUT[owned[0]].axis[0]
+            params[:, owned] = _ball_angles_in_limits(
+                np.deg2rad(rotations_to_channels(rotations[:, k], "ZXY")), owned)
+        else:
+            # Hinge about +-X: the angle of the rotation about X itself, signed by the axis.
+            # (Not the X angle of a ZXY decomposition: that lies in [-90, 90] degrees, and a
+            # knee bent 150 degrees would come back as 30 with Z and Y turned by 180.)
+            angle = np.arctan2(rotations[:, k, 2, 1], rotations[:, k, 1, 1])
+            params[:, owned[0]] = angle * POSE_LAYOUT[owned[0]].axis[0]
     return [Pose(row) for row in params], shape
+
+
+def _ball_angles_in_limits(zxy: np.ndarray, owned: list[int]) -> np.ndarray:
+    """Of the two ZXY angle triples (F, 3) of each rotation, (z, x, y) and
+    (z + 180, 180 - x, y + 180) degrees, the one nearer the joint's limits (`owned`: its three
+    parameter indices): a shoulder lifted 120 degrees forward has x = -120 within its range, but
+    the decomposition returns the twin with x = -60 and its twist 180 degrees out of range."""
+    twin = zxy + np.array([np.pi, 0.0, np.pi])
+    twin[:, 1] = np.pi - zxy[:, 1]
+    twin = np.mod(twin + np.pi, 2 * np.pi) - np.pi  # back into [-180, 180)
+
+    def excess(angles: np.ndarray) -> np.ndarray:
+        lo, hi = LOWER_LIMITS[owned], UPPER_LIMITS[owned]
+        return np.sum(np.maximum(lo - angles, 0.0) + np.maximum(angles - hi, 0.0), axis=1)
+
+    better = excess(twin) < excess(zxy) - 1e-12
+    return np.where(better[:, None], twin, zxy)
 
 
 PoseFrames = list[tuple[int, "np.ndarray | None"]]
@@ -184,8 +210,15 @@ def read_pose_file(path: Path | str) -> PoseFile:
     rotation about the origin, takes them to the world frame of the cameras (default: the
     identity, a Y-up world). ``frame_rate`` may be missing or null for a single pose
     (`mocap fit`'s fit.json, posed in its cloud's frame). Other keys are ignored, except that
-    a file saying ``"success": false`` (a body fit that failed) is refused. A one-line
-    `UserError` names what is wrong.
+    a file saying ``"success": false`` (a body fit that failed) is refused.
+
+    What no writer of the format produces is refused too, so that nothing downstream computes
+    with it: a frame number that is not an integer from 0 (to `MAX_FRAME_NUMBER`) or that
+    appears twice (the entries may come in any order), a shape value beyond `MAX_SHAPE_M`, and
+    params that `pose_params_problem` rejects (not finite, a root beyond
+    `ROOT_TRANSLATION_BOUND_M`, a joint past its limits by more than `LIMIT_TOLERANCE_RAD`).
+    Params of NaN only (as null) mark a lost frame. A one-line `UserError` names what is wrong:
+    the file, the frame and the parameter.
     """
     path = Path(path)
     try:
@@ -202,7 +235,10 @@ def read_pose_file(path: Path | str) -> PoseFile:
             raise TypeError("not a JSON object")
         frame_rate = None if data.get("frame_rate") is None else float(data["frame_rate"])
         shape = BodyShape(**{k: float(v) for k, v in data["shape"].items()})
-        entries = sorted(data["frames"], key=lambda e: int(e["frame"]))
+        entries = data["frames"]
+        if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+            raise TypeError("frames is not a list of objects")
+        numbers = [e["frame"] for e in entries]
         rotation = np.array(data.get("world_from_upright", np.eye(3)), dtype=float)
     except (KeyError, TypeError, ValueError) as exc:
         raise UserError(f"{path}: not a pose track ({exc!s}); expected shape, frames and (for "
@@ -212,12 +248,51 @@ def read_pose_file(path: Path | str) -> PoseFile:
         raise UserError(f"{path}: world_from_upright is not a 3x3 rotation")
     if not entries:
         raise UserError(f"{path} holds no frames")
+    if frame_rate is not None and not (np.isfinite(frame_rate) and frame_rate > 0):
+        raise UserError(f"{path}: frame_rate {frame_rate:g} is not a positive number of frames "
+                        "per second")
+    big = next(((k, v) for k, v in dataclasses.asdict(shape).items() if v > MAX_SHAPE_M), None)
+    if big is not None:
+        raise UserError(f"{path}: shape {big[0]} = {big[1]:.6g} m is beyond {MAX_SHAPE_M:g} m "
+                        "(not a person's body in metres)")
     frames: list[tuple[int, np.ndarray | None]] = []
-    for entry in entries:
-        values = entry.get("params")
-        row = None if values is None else np.asarray(values, dtype=float)
+    for number, entry in zip(numbers, entries, strict=True):
+        if not _is_frame_number(number):
+            raise UserError(f"{path}: frame {number!r} is not a frame number (an integer from "
+                            f"0 to {MAX_FRAME_NUMBER})")
+        frame, values = int(number), entry.get("params")
+        try:
+            row = None if values is None else np.asarray(values, dtype=float)
+        except (TypeError, ValueError):
+            raise UserError(f"{path}: frame {frame}: params is not a list of numbers") from None
         if row is not None and row.shape != (len(POSE_LAYOUT),):
-            raise UserError(f"{path}: frame {entry['frame']} has {row.size} pose parameters, "
+            raise UserError(f"{path}: frame {frame} has {row.size} pose parameters, "
                             f"not {len(POSE_LAYOUT)}")
-        frames.append((int(entry["frame"]), row))
+        if row is not None and np.isnan(row).all():
+            row = None  # a lost frame written as NaN rather than null
+        if row is not None and (problem := pose_params_problem(row)) is not None:
+            raise UserError(f"{path}: frame {frame}: {problem}")
+        frames.append((frame, row))
+    frames.sort(key=lambda item: item[0])
+    repeated = sorted({a for (a, _), (b, _) in itertools.pairwise(frames) if a == b})
+    if repeated:
+        raise UserError(f"{path}: frame {repeated[0]} appears more than once"
+                        + (f" (and {len(repeated) - 1} more frames)" if len(repeated) > 1 else "")
+                        + "; each frame needs one entry")
     return PoseFile(frame_rate, shape, frames, rotation)
+
+
+MAX_FRAME_NUMBER: int = 2**31 - 1
+"""Largest frame number of a pose file: video frame indices are 32-bit integers (two years of
+a 30 Hz video), and anything larger is not a frame of a video."""
+MAX_SHAPE_M: float = 10.0
+"""Largest segment length or radius (metres) of a pose file's shape: five times the tallest
+person's height; larger is not a body in metres."""
+
+
+def _is_frame_number(value: object) -> bool:
+    """An integer (or a float with an integer value) from 0 to `MAX_FRAME_NUMBER`; not a bool."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    return bool(np.isfinite(value) and float(value).is_integer()
+                and 0 <= value <= MAX_FRAME_NUMBER)

@@ -180,9 +180,8 @@ def fit_workspace(
     SfM models have no metric scale, so the height check of `FitConfig.metric` is off here.
     Returns the fit.json content and the paths.
     """
-    upstream = ws.step("dense")
-    if upstream is None or not ws.dense_cloud_path.exists():
-        raise UserError(f"{ws.root} has no dense cloud yet; run `mocap dense {ws.root}` first")
+    upstream = ws.require_step(
+        "dense", f"no dense cloud yet; run `mocap dense {ws.root}` first", f"mocap dense {ws.root}")
     config = dataclasses.replace(config, metric=False)
     settings = {"subject": dataclasses.asdict(subject), "fit": dataclasses.asdict(config)}
     fp = fingerprint("fit", settings, upstream.fingerprint)
@@ -198,7 +197,7 @@ def fit_workspace(
         write_fit(result, points[keep], None if colors is None else colors[keep], ws.body_dir,
                   ws.log_path("fit"), y_up=False)  # fmt: skip
     summary = fit_summary(result)
-    ws.record_step("fit", fp, config=settings, seconds=timer.seconds,
+    ws.record_step("fit", fp, outputs=list(paths.values()), config=settings, seconds=timer.seconds,
                    summary={k: summary[k] for k in ("success", "message", "residual_median",
                                                     "inlier_fraction", "height")})  # fmt: skip
     return summary, paths

@@ -566,7 +566,8 @@ def synthesize(ws_root: Path | str, config: SynthConfig, *,
         "seconds": {"poses": t_poses.seconds, "silhouettes": t_sil.seconds,
                     "total": total.seconds},
     }
-    ws.record_step(STEP, fp, config=config_record, seconds=total.seconds, summary=summary)
+    ws.record_step(STEP, fp, outputs=outputs, config=config_record, seconds=total.seconds,
+                   summary=summary)
     return SynthSummary(ws.root, summary)
 
 

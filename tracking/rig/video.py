@@ -453,7 +453,7 @@ def init_video(ws_root: Path | str, videos_dir: Path | str, calibration: Path | 
         for stale in (ws.silhouettes_dir, ws.tracks_dir, ws.gt_dir, ws.run_json):
             _remove(stale)
         write_cameras_json(ws.cameras_path, written)
-    ws.record_step(STEP, fp, config=settings, seconds=timer.seconds, summary={
+    ws.record_step(STEP, fp, outputs=outputs, config=settings, seconds=timer.seconds, summary={
         "cameras": per_camera, "frames": counts.pop(), "fps": fps[0], "notes": notes})
     return ws
 

@@ -482,7 +482,8 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
                "processed": len(frames), "background": background_text,
                "background_frames": background_frames, "multi_view_check": check,
                "warnings": warnings}
-    return ws.record_step(STEP, fp, config=settings, seconds=timer.seconds, summary=summary)
+    return ws.record_step(STEP, fp, outputs=outputs, config=settings, seconds=timer.seconds,
+                          summary=summary)
 
 
 def _log_camera(rec: Any, ws: Workspace, camera: Camera, result: _CameraResult, masks: Path,

@@ -136,7 +136,10 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
     frame_rate = frame_rate_of(ws)
 
     def masks_of(frame: int) -> list[np.ndarray]:
-        return [_read_mask(ws.silhouettes_dir / c.name / f"{frame:06d}.png", c) for c in cameras]
+        masks = [_read_mask(ws.silhouettes_dir / c.name / f"{frame:06d}.png", c) for c in cameras]
+        if any(m.all() for m in masks):
+            raise UserError(_all_foreground_message(ws, cameras, frames))
+        return masks
 
     world_from_upright = _upright_frame(cameras, masks_of(frames[0]))
     if given is not None:
@@ -167,7 +170,9 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
             bar.update()
         bar.close()
     if tracker.shape is None or all(r.pose is None for r in results):
-        raise UserError("the subject was lost in every frame; see logs/track.rrd")
+        reasons = sorted({r.event.removeprefix("lost: ") for r in results})
+        raise UserError(f"the subject was lost in every frame ({'; '.join(reasons[:3])}"
+                        f"{'; ...' if len(reasons) > 3 else ''}); see {ws.log_path('track')}")
     _write_outputs(outputs, results, tracker.shape, frame_rate, world_from_upright)
     tracked = [r for r in results if r.pose is not None]
     summary = {
@@ -179,8 +184,29 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         "evaluations_per_frame": float(np.mean([r.evaluations for r in results])),
         "height_m": tracker.shape.height, "frame_rate": frame_rate,
     }
-    ws.record_step("track", fp, config=settings, seconds=timer.seconds, summary=summary)
+    ws.record_step("track", fp, outputs=list(outputs.values()), config=settings,
+                   seconds=timer.seconds, summary=summary)
     return summary
+
+
+def _all_foreground_message(ws: Workspace, cameras: Sequence[Any], frames: list[int]) -> str:
+    """The error for silhouettes that are foreground in every pixel, naming every camera and
+    frame (of `frames`) with one: read again on this failure path only."""
+    from tracking.silhouettes.step import _ranges
+
+    full: dict[str, list[int]] = {}
+    for camera in cameras:
+        hits = [f for f in frames if _read_mask(
+            ws.silhouettes_dir / camera.name / f"{f:06d}.png", camera).all()]
+        if hits:
+            full[camera.name] = hits
+    where = "; ".join(f"{name} in frame(s) {_ranges(hits, 1)}"
+                      + (f" (all {len(frames)})" if len(hits) == len(frames) else "")
+                      for name, hits in full.items())  # fmt: skip
+    return (f"{ws.silhouettes_dir}: every pixel is foreground in {where}: the background "
+            f"model failed there, so no subject can be found; redo `mocap silhouettes "
+            f"{ws.root}` (e.g. with frames of the empty scene: --background frames:A-B), or "
+            "track other frames (--first/--last)")
 
 
 def _upright_frame(cameras: Sequence[Any], masks: Sequence[np.ndarray]) -> np.ndarray:

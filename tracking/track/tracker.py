@@ -655,10 +655,15 @@ class SilhouetteTracker:
         self.evaluations = 0
         area = _known_area([np.asarray(m, bool) for m in masks], self.known)
         empty = [c.name for c, m in zip(self.cameras, masks, strict=True) if not m.any()]
-        if empty:
+        # Foreground in every pixel: the background model failed, and the silhouette has no
+        # outline to fit (its distance field is infinite).
+        full = [c.name for c, m in zip(self.cameras, masks, strict=True) if m.all()]
+        if empty or full:
             self.history = []
+            why = "; ".join([*([f"empty silhouette in {', '.join(empty)}"] if empty else []),
+                             *([f"every pixel foreground in {', '.join(full)}"] if full else [])])
             return FrameResult(frame, None, float("nan"), area, 0, time.perf_counter() - start,
-                               f"lost: empty silhouette in {', '.join(empty)}")  # fmt: skip
+                               f"lost: {why}")  # fmt: skip
         event = ""
         try:
             if not self.history:

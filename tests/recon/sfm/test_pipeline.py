@@ -38,7 +38,7 @@ def _synthetic_workspace(tmp_path, *, noise_px: float = 0.0):
             pycolmap.synthesize_noise(
                 pycolmap.SyntheticNoiseOptions(point2D_stddev=noise_px), noisy, db
             )
-    ws.record_step("matches", "synthetic", config={}, seconds=0.0)
+    ws.record_step("matches", "synthetic", outputs=[ws.database_path], config={}, seconds=0.0)
     return ws, truth
 
 

@@ -288,6 +288,16 @@ def test_bad_number_names_the_line() -> None:
         parse_bvh(text, source="clip.bvh")
 
 
+def test_a_rotation_beyond_any_joint_angle_is_refused() -> None:
+    # 1e300 degrees parses as a float, but its rotation (the remainder modulo 360) is noise.
+    text = two_joint_bvh("Zrotation Xrotation Yrotation", "0 0 0 0 0 0 0 1e300 0")
+    with pytest.raises(ValueError, match=r"^clip\.bvh: frame 0: Xrotation of .* is 1e\+300 "
+                       r"degrees, beyond the \+-1e\+06"):
+        parse_bvh(text, source="clip.bvh")
+    # Unwrapped angles of a spinning subject (here 20 turns) are rotations like any other.
+    parse_bvh(two_joint_bvh("Zrotation Xrotation Yrotation", "0 0 0 7200 0 0 0 -7200 0"))
+
+
 def test_wrong_channel_count_in_hierarchy_names_the_line() -> None:
     text = two_joint_bvh("Zrotation Xrotation Yrotation", "0 0 0 0 0 0 0 0 0").replace(
         "CHANNELS 3 Zrotation Xrotation Yrotation", "CHANNELS 4 Zrotation Xrotation Yrotation"

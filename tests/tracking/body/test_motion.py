@@ -11,7 +11,15 @@ import pytest
 from recon.errors import UserError
 from tests.helpers import shared_dataset
 from tracking.body.bvh import CMU_METRES_PER_UNIT, format_bvh, parse_bvh, read_bvh
-from tracking.body.model import NODE_NAMES, BodyShape, Pose, node_positions_in_world
+from tracking.body.model import (
+    LIMIT_TOLERANCE_RAD,
+    NODE_NAMES,
+    PARAM_INDEX,
+    BodyShape,
+    Pose,
+    node_positions_in_world,
+    pose_params_problem,
+)
 from tracking.body.motion import (
     is_body_skeleton,
     motion_from_poses,
@@ -114,3 +122,106 @@ def test_bad_pose_files_are_one_line_user_errors(tmp_path, changes, says):
     with pytest.raises(UserError, match=says) as error:
         read_pose_file(_pose_file(tmp_path, **changes))
     assert "\n" not in str(error.value)
+
+
+def test_large_flexions_come_back_from_a_bvh():
+    """A hinge past 90 degrees and a limb lifted past the horizontal: the BVH's rotations are
+    read back as the model's own parameters (the ZXY decomposition alone turns a 150 degree
+    knee into 30 degrees with Z and Y at 180), inside the joint limits."""
+    shape = BodyShape.default(1.75)
+    pose = Pose.from_dict({"root_ty": 0.9, "root_ry": 3.0, "l_knee_flex": np.deg2rad(150),
+                           "r_elbow_flex": np.deg2rad(120), "l_shoulder_rx": np.deg2rad(-150),
+                           "r_shoulder_rx": np.deg2rad(-120), "r_shoulder_ry": 0.3,
+                           "l_hip_rx": np.deg2rad(-120), "l_hip_rz": np.deg2rad(20)})  # fmt: skip
+    _, back, _ = _round_trip([pose], shape)
+    np.testing.assert_allclose(back[0].params, pose.params, atol=1e-7)
+    assert back[0].violations() == ()
+
+
+# Issue 23: a pose file that no writer produces is refused, naming the file, frame and parameter.
+def _frames(**rows):
+    """Frames 0-4 of in-limits poses; `rows` replace entries by index (f3={...})."""
+    frames = [{"frame": k, "params": [0.0, 0.9, 0.1 * k] + [0.0] * 21} for k in range(5)]
+    for key, value in rows.items():
+        frames[int(key[1:])] = value
+    return frames
+
+
+def _params(**named):
+    params = [0.0, 0.9, 0.0] + [0.0] * 21
+    for name, value in named.items():
+        params[PARAM_INDEX[name]] = value
+    return params
+
+
+_TOL = LIMIT_TOLERANCE_RAD
+
+
+@pytest.mark.parametrize(("frames", "says"), [
+    (_frames(f0={"frame": -3, "params": _params()}), r"frame -3 is not a frame number"),
+    (_frames(f2={"frame": 1, "params": _params()}), r"frame 1 appears more than once"),
+    (_frames(f2={"frame": 2.5, "params": _params()}), r"frame 2\.5 is not a frame number"),
+    (_frames(f2={"frame": "2", "params": _params()}), r"frame '2' is not a frame number"),
+    (_frames(f2={"frame": True, "params": _params()}), r"frame True is not a frame number"),
+    (_frames(f2={"frame": 2**31, "params": _params()}), r"frame 2147483648 is not a frame"),
+    (_frames(f2={"params": _params()}), r"not a pose track \('frame'\)"),
+    (_frames(f2={"frame": 2, "params": _params(l_knee_flex=1e300)}),
+     r"frame 2: l_knee_flex = 5\.72958e\+301 deg is outside its joint limits 0\.\.150 deg"),
+    (_frames(f2={"frame": 2, "params": _params(root_tx=1e300)}),
+     r"frame 2: root_tx = 1e\+300 m is beyond the \+-1000 m"),
+    (_frames(f2={"frame": 2, "params": _params(root_tz=-1000.5)}),
+     r"frame 2: root_tz = -1000\.5 m"),
+    (_frames(f2={"frame": 2, "params": _params(neck_flex=float("nan"))}),
+     r"frame 2: neck_flex is nan \(not a finite number\)"),
+    (_frames(f2={"frame": 2, "params": _params(root_ty=float("inf"))}), r"frame 2: root_ty is inf"),
+    (_frames(f2={"frame": 2, "params": _params(r_knee_flex=-3 * _TOL)}),
+     r"frame 2: r_knee_flex = -0\.003 deg is outside .* \(tolerance 0\.001 deg\)"),
+    (_frames(f2={"frame": 2, "params": _params(root_ry=np.pi + 3 * _TOL)}),
+     r"frame 2: root_ry = 180\.003 deg is outside its joint limits -180\.\.180"),
+    (_frames(f2={"frame": 2, "params": ["a"] * 24}), r"frame 2: params is not a list of numbers"),
+])  # fmt: skip
+def test_impossible_frames_and_poses_are_refused(tmp_path, frames, says):
+    with pytest.raises(UserError, match=r"pose\.json: " + says) as error:
+        read_pose_file(_pose_file(tmp_path, frames=frames))
+    assert "\n" not in str(error.value)
+
+
+@pytest.mark.parametrize(("changes", "says"), [
+    ({"frame_rate": 0}, r"frame_rate 0 is not a positive number"),
+    ({"frame_rate": float("nan")}, r"frame_rate nan is not a positive number"),
+    ({"shape": {**dataclasses.asdict(BodyShape.default(1.7)), "thigh_radius": 1e300}},
+     r"shape thigh_radius = 1e\+300 m is beyond 10 m"),
+])  # fmt: skip
+def test_impossible_frame_rates_and_shapes_are_refused(tmp_path, changes, says):
+    with pytest.raises(UserError, match=says):
+        read_pose_file(_pose_file(tmp_path, frames=_frames(), **changes))
+
+
+def test_what_writers_produce_is_read(tmp_path):
+    """Limits reached exactly (the tracker clips to them) or within the tolerance (text), a
+    lost frame as null or as NaN, entries in any order, integral floats as frame numbers."""
+    frames = [
+        {"frame": 3, "params": _params(l_knee_flex=0.0, r_knee_flex=np.deg2rad(150),
+                                       l_hip_rx=np.deg2rad(-125), root_ry=-np.pi)},
+        {"frame": 0, "params": _params(r_elbow_flex=-0.5 * _TOL, root_tx=-999.0)},
+        {"frame": 1.0, "params": None},
+        {"frame": 2, "params": [float("nan")] * 24},
+    ]  # fmt: skip
+    read = read_pose_file(_pose_file(tmp_path, frames=frames))
+    assert [f for f, _ in read.frames] == [0, 1, 2, 3]
+    assert read.frames[1][1] is None and read.frames[2][1] is None
+    assert read.frames[3][1][PARAM_INDEX["r_knee_flex"]] == np.deg2rad(150)
+
+
+def test_pose_params_problem_names_the_first_bad_parameter():
+    ok = np.array(_params())
+    assert pose_params_problem(ok) is None
+    bad = ok.copy()
+    bad[PARAM_INDEX["l_shoulder_ry"]] = np.deg2rad(100)
+    assert pose_params_problem(bad) == ("l_shoulder_ry = 100 deg is outside its joint limits "
+                                        "-90..90 deg (tolerance 0.001 deg)")
+    # Without the joint limits (a BVH's rotations): only finiteness and the root's bound.
+    assert pose_params_problem(bad, joint_limits=False) is None
+    bad[PARAM_INDEX["root_tx"]] = 2000.0
+    assert pose_params_problem(bad, joint_limits=False).startswith("root_tx = 2000 m")
+    assert pose_params_problem(np.zeros(23)) == "23 pose parameters, not 24"

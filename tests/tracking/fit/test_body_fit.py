@@ -124,7 +124,7 @@ def test_fit_step_in_a_workspace_is_resumable(tmp_path):
     ws.dense_cloud_path.parent.mkdir(parents=True)
     # A workspace cloud has no metric scale: the same body at 3x must still fit.
     _write_cloud(ws.dense_cloud_path, 3 * points)
-    ws.record_step("dense", "test-cloud", config={}, seconds=0.0)
+    ws.record_step("dense", "test-cloud", outputs=[ws.dense_cloud_path], config={}, seconds=0.0)
     summary, paths = fit_workspace(ws, SubjectConfig(), FitConfig())
     assert summary["success"], summary["message"]
     assert summary["height"] == pytest.approx(3 * 1.75, rel=0.01)

@@ -133,6 +133,15 @@ def test_an_empty_silhouette_loses_the_frame_without_nan():
     assert result.pose is None and "empty silhouette in cam02" in result.event
 
 
+def test_an_all_foreground_silhouette_loses_the_frame_without_nan():
+    # A failed background model: every pixel foreground, so no outline to fit (issue 23).
+    tracker = SilhouetteTracker(CAMERAS, TrackConfig(), shape=SHAPE)
+    masks = _masks(_walk(1)[0])
+    masks[1] = np.ones_like(masks[1])
+    result = tracker.track(7, masks)
+    assert result.pose is None and "every pixel foreground in cam01" in result.event
+
+
 # The rig as Qualisys and Pose2Sim calibrate it: a Z-up world. The tracker works in the rig's
 # upright frame (Y up) and writes the joints back in the world frame.
 WORLD_FROM_YUP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
@@ -161,6 +170,7 @@ def _joint_errors(ws) -> tuple[list[dict], list[float]]:
                                        - truth[r["frame"], r["joint"]])) for r in rows]
 
 
+@pytest.mark.slow  # its path is covered faster elsewhere (make test's 10-minute budget)
 @pytest.mark.shared_data
 def test_cli_synth_then_track_writes_every_output(tmp_path):
     ws = _z_up_walk(tmp_path, 3)
