@@ -61,7 +61,7 @@ POINTS = [
     KillPoint("sfm-with-write-ahead-log", "sfm", "init",
               lambda ws: (ws / "database.partial.db-wal").exists()),
     KillPoint("sfm-during-mapping", "sfm", "init", _exists("sparse.partial")),
-    KillPoint("sfm-writing-run-record", "sfm", "init", _exists("run.partial.json")),
+    KillPoint("sfm-after-a-step-record", "sfm", "init", lambda ws: _recorded(ws, "intrinsics")),
     KillPoint("dense-during-undistortion", "dense", "sfm", _exists("dense/undistorted.partial")),
     KillPoint("dense-during-stereo", "dense", "sfm", _exists(".dense-*")),
     KillPoint("dense-writing-cloud", "dense", "sfm", _exists("dense/fused.partial.ply")),
