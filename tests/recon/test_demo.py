@@ -5,9 +5,12 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from tests.helpers import recording_entities, run_cli
 
 
+@pytest.mark.slow  # 30-45 s; `make demo` / `make test-all` run it (make test's 10-minute budget)
 def test_demo_recovers_the_known_cameras_and_surfaces(tmp_path):
     out = tmp_path / "demo"
     result = run_cli("demo", "--out", out, "--num-views", "10", "--no-compare", "--no-capture")

@@ -129,6 +129,7 @@ def test_frame_range_and_empty_background_frames(blob_workspace, tmp_path: Path)
         make_silhouettes(Workspace(tmp_path), SilhouettesConfig())
 
 
+@pytest.mark.slow  # 30-45 s; `make demo` / `make test-all` run it (make test's 10-minute budget)
 def test_background_photos_recover_a_subject_who_stays_put(tmp_path: Path):
     """A ball wobbling about one spot is part of its video's median; each camera's photo of the
     empty scene (5% darker) replaces the median where it moved, but not where the photo shows
