@@ -120,3 +120,39 @@ def test_pixels_of_unknown_background_do_not_carve():
         assert (told[k] & truth[k]).sum() >= 0.99 * truth[k].sum()
     assert min((blind[k] & truth[k]).sum() / truth[k].sum() for k in (0, 2, 3)) < 0.9
     assert (told[1] == masks[1]).all()  # cam01's known half is confirmed by the others
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_coarse_to_fine_candidates_carve_the_very_hull_of_the_whole_cube(seed: int):
+    """hull_candidates skips blocks of voxels; carving what is left must equal carving every
+    voxel of the cube, on scenes with distortion (barrel and pincushion), a content box, stray
+    blobs, an empty view and unknown pixels."""
+    import dataclasses
+
+    import cv2
+
+    from tracking.silhouettes.hull import carve, hull_candidates, voxel_centres
+
+    rng = np.random.default_rng(seed)
+    cameras = [dataclasses.replace(c, dist=np.array([k1, 0.02, 0.0, 0.0, 0.0]))
+               for c, k1 in zip(ring_cameras(4, 2.5, 1.2, width=320, height=240,
+                                             focal_px=220.0 + 60 * seed),
+                                rng.uniform(-0.25, 0.25, 4), strict=True)]
+    masks = ball_masks(cameras, CENTRE + rng.normal(0, 0.2, 3), 0.35)
+    for mask in masks:  # stray blobs one view alone sees
+        for _ in range(3):
+            x, y = rng.integers(0, 320), rng.integers(0, 240)
+            cv2.circle(mask.view(np.uint8), (int(x), int(y)), int(rng.integers(3, 20)), 1, -1)
+    unknown = [None, (rng.random((240, 320)) < 0.002), None, None]
+    if seed % 3 == 0:
+        masks[3][:] = False  # an empty view takes no part
+    boxes = [None, (10, 5, 300, 230), None, (0, 0, 320, 200)]
+    centre = CENTRE + rng.normal(0, 0.1, 3)
+    for settings in ({}, {"dilate_px": 7, "boxes": boxes, "min_views": 2, "unknown": unknown}):
+        points, _ = voxel_centres(centre, 2.0, 0.04)
+        full, _ = carve(cameras, masks, points, **settings)
+        candidates, index = hull_candidates(cameras, masks, centre, 2.0, 0.04, **settings)
+        np.testing.assert_array_equal(candidates, points[index])
+        kept, _ = carve(cameras, masks, candidates, **settings)
+        assert full.any() and len(index) < 0.5 * len(points)
+        np.testing.assert_array_equal(np.flatnonzero(full), index[kept])
