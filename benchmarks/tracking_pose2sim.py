@@ -4,7 +4,8 @@
 
 `mocap init-video` (Calib.qca.txt), `mocap silhouettes` (the demo has no empty frame: temporal
 median background, completed by the extrinsic calibration shots, which show the lab without the
-subject, where the subject moved; the multi-view check) and `mocap track` with their defaults,
+subject but with people and objects the videos do not, where the subject moved: ``--plates
+cluttered``; the multi-view check) and `mocap track` with their defaults,
 then the silhouette IoU between the tracked model and the image silhouettes, per camera per
 frame, over the pixels whose label the silhouettes can tell (CDnet leaves its "unknown" pixels
 out of its scores likewise: `silhouettes/<camera>/unknown.png`, where the photo shows something
@@ -67,8 +68,9 @@ def main() -> None:
         if not (ws / "cameras.json").exists():
             mocap("init-video", str(ws), "--videos", str(DEMO / "videos"), "--calibration",
                    str(DEMO / "calibration" / "Calib.qca.txt"))  # fmt: skip
+        # The calibration shots show people and objects the videos do not: not clean plates.
         t_sil = mocap("silhouettes", str(ws), "--background-images",
-                      str(DEMO / "calibration" / "extrinsics"))
+                      str(DEMO / "calibration" / "extrinsics"), "--plates", "cluttered")
         extra = ["--last", str(args.last)] if args.last is not None else []
         started = time.time()
         t_track = mocap("track", str(ws), *extra)

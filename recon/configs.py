@@ -49,7 +49,8 @@ def add_config_arguments(
         elif isinstance(kind, type) and issubclass(kind, enum.Enum):
             kwargs.update(choices=[m.value for m in kind], type=str)
         else:
-            kwargs.update(type=kind, metavar=f.name.split("_")[-1].upper())
+            kwargs.update(type=kind,
+                          metavar=f.metadata.get("metavar", f.name.split("_")[-1].upper()))
         if isinstance(default, tuple) and default:
             shown = ", ".join(str(getattr(v, "value", v)) for v in default)
             help_text += f" (default: {shown})"

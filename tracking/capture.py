@@ -140,7 +140,7 @@ def capture(
     """Videos in ``videos_dir`` (one per camera of ``calibration_path``) → the video workspace
     ``ws_root`` → silhouettes → tracked motion → motion report (module docstring).
 
-    ``background_images``: a folder of photos of the empty scene, one per camera (the
+    ``background_images``: a folder of photos of the empty scene, one or more per camera (the
     silhouettes' ``--background-images``; it replaces ``silhouettes.background_images``). The
     step configs default to their commands' defaults. Raises `UserError` ``"<step>: <why>"``.
     """

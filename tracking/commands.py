@@ -260,8 +260,9 @@ class InitVideoCommand:
 
 class SilhouettesCommand:
     help = "foreground masks of every camera's video frames (background subtraction)"
-    description = ("Per camera, a background model (temporal median of the video, or mean and "
-                   "spread of empty-scene frames) and per frame a full-resolution silhouette: "
+    description = ("Per camera, a background model (background plates: photos or a clip of "
+                   "the empty scene; else the temporal median of the video, or the mean and "
+                   "spread of its empty-scene frames) and per frame a full-resolution silhouette: "
                    "thresholds for foreground, background and shadow, then morphological "
                    "clean-up. Writes WS/silhouettes/<camera>/<frame:06d>.png (0/255) and "
                    "WS/logs/silhouettes.rrd; frames whose silhouette is empty or touches the "

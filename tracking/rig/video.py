@@ -163,7 +163,12 @@ def read_frames(ws: Workspace, camera_name: str, frames: Iterable[int] | None = 
 
     A requested frame past the end of the video is a `UserError`, after the frames before it.
     """
-    path = video_path(ws, camera_name)
+    return read_video_frames(video_path(ws, camera_name), frames)
+
+
+def read_video_frames(path: Path, frames: Iterable[int] | None = None
+                      ) -> Iterator[tuple[int, np.ndarray]]:  # fmt: skip
+    """`read_frames` of the video file at ``path`` (in a workspace or not)."""
     wanted = None if frames is None else sorted({int(i) for i in frames})
     if wanted and wanted[0] < 0:
         raise UserError(f"frame indexes are 0-based; got {wanted[0]}")

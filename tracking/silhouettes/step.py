@@ -10,8 +10,22 @@ Reads a video workspace (`tracking.rig.video`) and writes::
                                               backgrounds, foreground fraction over frames
     WS/run.json                               step ``silhouettes``: config and summary
 
-The background model of each camera is either the per-pixel mean and standard deviation of
-frames that show the empty scene (``--background frames:A-B``, the thesis' method; at most
+The background model of each camera comes from one of four sources (the README says which to
+use when). **Background plates**, recorded before the subject walks in: photos
+(``--background-images``) or a clip (``--background-video``) of the empty scene per camera
+(`background_plates` pairs them with the cameras by name). With ``--plates clean`` (the
+default) they are the model (6.2.1): the mean and standard deviation of a camera's photos or
+of all its clip's frames (`plate_model`); one photo cannot show its own spread, which a noise
+model stands in for (`BackgroundModel.from_photo`: the photo's measured noise, and half a
+pixel of misalignment at edges). Each frame's exposure is matched to the plate
+(`tracking.silhouettes.subtraction.exposure_gain`) before it is classified, and the plates
+are refused in one line when they leave most of the image foreground in every one of a few
+frames spread over the video (another camera's plate, a camera that moved). A camera without
+a plate, when the others have one, is refused unless ``--median-fallback``. With ``--plates
+cluttered`` (photos that may show people or objects the video does not, as the Pose2Sim
+demo's calibration shots do), the median below stays the model and the photos complete it
+where the subject moved (`with_background_photo`). Without plates, either the per-pixel mean
+and standard deviation of frames that show the empty scene (``--background frames:A-B``, the thesis' method; at most
 ``--background-samples`` of them, spread over A-B), or, when no such frames exist (the Pose2Sim
 demo), the temporal median and median absolute deviation of ``--background-samples`` frames
 spread evenly over the whole video (``--background median``), then again over the frames
@@ -38,6 +52,7 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import dataclasses
+import enum
 import itertools
 import re
 from collections.abc import Callable, Iterator, Sequence
@@ -62,19 +77,25 @@ from recon.workspace import (
 )
 from tracking.rig.video import STEP as INIT_STEP
 from tracking.rig.video import (
+    VIDEO_SUFFIXES,
     content_box,
     name_in_file_name,
     read_frames,
+    read_video_frames,
     video_info,
     video_path,
     workspace_cameras,
 )
 from tracking.silhouettes.hull import HullCheckConfig, consistent_silhouettes
 from tracking.silhouettes.subtraction import (
+    PHOTO_MISALIGNMENT_PX,
     BackgroundModel,
     SilhouetteConfig,
     disc,
+    exposure_gain,
     fill_holes,
+    matched_exposure,
+    noise_sigma,
     silhouette_from_frame,
 )
 
@@ -83,6 +104,16 @@ UNKNOWN_NAME = "unknown.png"
 """``silhouettes/<camera>/unknown.png``: the camera's pixels whose background is unknown (255),
 left out of the tracking energy and of the silhouette IoU; written only when there are any."""
 _BACKGROUND_FORMAT = re.compile(r"^(median|frames:(\d+)-(\d+))$")
+
+
+class Plates(enum.StrEnum):
+    """What the background plates show (``--plates``)."""
+
+    CLEAN = "clean"
+    """Only the empty scene: they are the background model."""
+    CLUTTERED = "cluttered"
+    """Maybe people or objects the video does not show: they complete the median."""
+
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -113,12 +144,34 @@ class SilhouettesConfig:
         default=1, metadata={"help": "process every N-th frame from --first (1: all)"})
     background_images: Path | None = field(
         default=None,
-        metadata={"help": "folder of photos of the scene taken by the fixed cameras, one per "
-                  "camera with the camera's name in the file name (cam01_ext.png for cam01), "
-                  "at the video's size or the calibrated size the video was scaled from; with "
-                  "--background median they replace the median where the subject moved (where "
-                  "a subject who stays put is part of the median); they may show other people "
-                  "or objects: the multi-view check removes what one camera alone sees"},
+        metadata={"metavar": "DIR",
+                  "help": "folder of background plates: photos of the empty scene taken by "
+                  "the fixed cameras, one or more per camera, each with the camera's name in "
+                  "its file name (cam01.png, cam01_2.jpg for cam01) or in a subfolder named "
+                  "like the camera; at the video's size or the calibrated size the video was "
+                  "scaled from. With --plates clean they are the background model: the mean "
+                  "and spread of a camera's photos (one photo: its colours, with a spread "
+                  "from its measured noise and half a pixel of misalignment at edges)"},
+    )  # fmt: skip
+    background_video: Path | None = field(
+        default=None,
+        metadata={"metavar": "DIR",
+                  "help": "folder of background clips: a video of the empty scene per "
+                  "camera, named like the camera's video (cam01.mp4, or a subfolder cam01/); "
+                  "the background model is the mean and spread over all its frames"},
+    )  # fmt: skip
+    plates: Plates = field(
+        default=Plates.CLEAN,
+        metadata={"help": "'clean': the plates show only the empty scene and are the "
+                  "background model, each frame's exposure matched to them; 'cluttered': "
+                  "the photos may show people or objects the video does not (the Pose2Sim "
+                  "demo's calibration shots): the temporal median stays the model and a photo "
+                  "fills in only where the subject moved and the video confirms it"},
+    )  # fmt: skip
+    median_fallback: bool = field(
+        default=False,
+        metadata={"help": "with plates, a camera that has none uses the temporal median of "
+                  "its video (default: refuse, naming the camera)"},
     )  # fmt: skip
     logged_frames: int = field(
         default=5,
@@ -148,9 +201,37 @@ class SilhouettesConfig:
                                 f"got {getattr(self, name)}")
         if self.last is not None and self.last < self.first:
             raise UserError(f"--last {self.last} is before --first {self.first}")
-        if self.background_images is not None and self.background_frames is not None:
-            raise UserError("--background-images completes the median background; with "
-                            f"--background {self.background} the empty scene is in the video")
+        try:
+            object.__setattr__(self, "plates", Plates(self.plates))
+        except ValueError:
+            raise UserError(f"--plates {self.plates!r}: expected "
+                            f"{' or '.join(p.value for p in Plates)}") from None
+        if self.background_images is not None and self.background_video is not None:
+            raise UserError("give --background-images or --background-video, not both")
+        if self.plate_flag is not None and self.background_frames is not None:
+            raise UserError(f"{self.plate_flag} is the background; with --background "
+                            f"{self.background} the empty scene is in the video: give one")
+        if self.plates == "cluttered" and self.background_video is not None:
+            raise UserError("--plates cluttered takes --background-images (photos that may "
+                            "show what the video does not), not --background-video")
+
+    @property
+    def plate_folder(self) -> Path | None:
+        """The folder of the background plates (photos or clips), None without."""
+        return self.background_images if self.background_images is not None \
+            else self.background_video
+
+    @property
+    def plate_flag(self) -> str | None:
+        """``--background-images`` or ``--background-video``, whichever is given."""
+        if self.background_images is not None:
+            return "--background-images"
+        return "--background-video" if self.background_video is not None else None
+
+    @property
+    def plates_are_model(self) -> bool:
+        """Whether clean plates are the background model (else the median, or frames A-B)."""
+        return self.plate_folder is not None and self.plates == "clean"
 
     @property
     def background_frames(self) -> tuple[int, int] | None:
@@ -287,49 +368,119 @@ def _odd(length: float) -> int:
     return max(3, round(length) | 1)
 
 
-def background_images(folder: Path, cameras: Sequence[Camera]) -> dict[str, Path]:
-    """Camera name -> its photo in `folder`: the one image whose file name contains the
-    camera's name as a word, case and separators ignored like the videos' names
-    (``cam01_ext.png`` for cam01 or cam_01, not for cam010); one-line errors for
-    a missing folder, no photo of any camera, or two photos of one."""
+def background_plates(config: SilhouettesConfig, cameras: Sequence[Camera]
+                      ) -> dict[str, list[Path]]:  # fmt: skip
+    """Camera name -> its plates (``config.background_images`` photos, or
+    ``config.background_video`` clips), sorted: the files whose name contains the camera's
+    name as a word, case and separators ignored like the videos' names (``cam01_ext.png``
+    for cam01 or cam_01, not for cam010), and every such file in a subfolder named like the
+    camera. Files of other types and hidden ones are left alone. One-line errors: a missing
+    folder, no plate at all, a plate or subfolder that names no camera or two, and a camera
+    without a plate while others have one (unless ``median_fallback``: it is left out)."""
+    folder, flag = config.plate_folder, config.plate_flag
+    if folder is None or flag is None:
+        return {}
+    suffixes = IMAGE_SUFFIXES if config.background_images is not None else VIDEO_SUFFIXES
+    what = "images" if config.background_images is not None else "videos"
     if not folder.is_dir():
-        raise UserError(f"--background-images {folder}: no such folder")
-    images = sorted(p for p in folder.iterdir()
-                    if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
-    found: dict[str, Path] = {}
-    for camera in cameras:
-        word = name_in_file_name(camera.name)
-        matches = [p for p in images if word.search(p.stem.lower())]
-        if len(matches) > 1:
-            raise UserError(f"--background-images {folder}: {len(matches)} images name camera "
-                            f"{camera.name} ({', '.join(p.name for p in matches[:3])}); keep one")
-        if matches:
-            found[camera.name] = matches[0]
+        raise UserError(f"{flag} {folder}: no such folder")
+    names = ", ".join(c.name for c in cameras)
+    found: dict[str, list[Path]] = {}
+    for entry in sorted(folder.iterdir()):
+        if entry.name.startswith("."):
+            continue
+        if entry.is_dir():
+            owners = [c for c in cameras if name_in_file_name(c.name).fullmatch(entry.name.lower())]
+            files = sorted(p for p in entry.iterdir() if p.is_file()
+                           and not p.name.startswith(".") and p.suffix.lower() in suffixes)
+        elif entry.suffix.lower() in suffixes:
+            owners = [c for c in cameras if name_in_file_name(c.name).search(entry.stem.lower())]
+            files = [entry]
+        else:
+            continue
+        if entry.is_dir() and not files:
+            continue
+        if len(owners) != 1:
+            which = ("names no camera" if not owners else
+                     f"names {len(owners)} cameras ({', '.join(c.name for c in owners)})")
+            raise UserError(f"{flag}: {entry} {which}; name each plate after its camera "
+                            f"({names}) or put it in a folder named like it")
+        found.setdefault(owners[0].name, []).extend(files)
     if not found:
-        raise UserError(f"--background-images {folder}: no image names a camera "
-                        f"({', '.join(c.name for c in cameras)})")
-    return found
+        raise UserError(f"{flag} {folder}: no {what} ({', '.join(suffixes)}) that name a "
+                        f"camera ({names})")
+    missing = [c.name for c in cameras if c.name not in found]
+    if missing and not config.median_fallback:
+        raise UserError(f"{flag} {folder}: no plate for camera(s) {', '.join(missing)} while "
+                        "the others have one; add theirs, or give --median-fallback to use "
+                        "the temporal median of their video")
+    return {name: sorted(paths) for name, paths in found.items()}
 
 
 def read_background_image(path: Path, camera: Camera) -> np.ndarray:
-    """The photo (H, W, 3) uint8 at the camera's video size: as it is, or, when it has the size
-    the video was scaled from (`tracking.rig.video` letterboxed videos), scaled by the same factor
-    and centred between black bars."""
+    """A photo (H, W, 3) uint8 at the camera's video size (`plate_at_video_size`)."""
     image = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if image is None:
         raise UserError(f"cannot read background image {path}")
+    return plate_at_video_size(image, camera, path)
+
+
+def plate_at_video_size(image: np.ndarray, camera: Camera, path: Path) -> np.ndarray:
+    """A plate (photo or clip frame, (h, w, 3) uint8) at the camera's video size: as it is,
+    or, when it has the size the video was scaled from (`tracking.rig.video` letterboxed
+    videos), scaled by the same factor and centred between black bars; any other size is a
+    one-line error that names ``path``."""
     h, w = image.shape[:2]
     if (h, w) == (camera.height, camera.width):
         return image
     s = min(camera.width / w, camera.height / h)
     if abs(s - 1.0) > 0.1:
-        raise UserError(f"background image {path.name} is {w}x{h}, camera {camera.name}'s video "
-                        f"{camera.width}x{camera.height}")
+        raise UserError(f"background plate {path.name} is {w}x{h}, camera {camera.name}'s "
+                        f"video {camera.width}x{camera.height}")
     pad_x, pad_y = (camera.width - s * w) / 2, (camera.height - s * h) / 2
     # Pixel centres at +0.5 on both sides: x_video = s * x_photo + pad, in OpenCV's integer
     # centres x' = s * x + (s / 2 + pad - 1 / 2).
     warp = np.float32([[s, 0, s / 2 + pad_x - 0.5], [0, s, s / 2 + pad_y - 0.5]])
     return cv2.warpAffine(image, warp, (camera.width, camera.height), flags=cv2.INTER_LINEAR)
+
+
+def plate_model(paths: Sequence[Path], camera: Camera, *, video: bool
+                ) -> tuple[BackgroundModel, dict[str, Any]]:  # fmt: skip
+    """The background model of one camera's clean plates and how it was made (``model``,
+    ``frames``, and for one photo its ``noise_sigma`` per channel): photos (``video``
+    False) or the frames of clips, each at the video's size (`plate_at_video_size`). Two
+    photos or more, or clip frames: their mean and standard deviation
+    (`BackgroundModel.from_frames`, frames streamed); one photo: `BackgroundModel.from_photo`.
+    """
+    if not video:
+        photos = [read_background_image(p, camera) for p in paths]
+        if len(photos) == 1:
+            model = BackgroundModel.from_photo(photos[0])
+            sigma = [round(float(v), 2) for v in noise_sigma(photos[0])]
+            return model, {"model": "one photo: spread from its noise and "
+                           f"{PHOTO_MISALIGNMENT_PX} px of misalignment", "frames": 1,
+                           "noise_sigma": sigma}
+        return BackgroundModel.from_frames(photos), {
+            "model": f"mean and spread of {len(photos)} photos", "frames": len(photos)}
+    count = 0
+
+    def frames() -> Iterator[np.ndarray]:
+        nonlocal count
+        for path in paths:
+            for _, frame in read_video_frames(path):
+                count += 1
+                yield plate_at_video_size(frame, camera, path)
+
+    model = BackgroundModel.from_frames(frames())
+    clips = f"{len(paths)} clips" if len(paths) > 1 else "its clip"
+    return model, {"model": f"mean and spread of {count} frames of {clips}", "frames": count}
+
+
+_PLATE_CHECK_FRAMES = 5
+"""Processed frames, spread over the sequence, that each camera's plates are checked on."""
+_PLATE_MAX_FOREGROUND = 0.5
+"""A plate that leaves more than this fraction of the image foreground in every checked frame
+is refused: another camera's plate, a camera that moved, or a plate that shows the subject."""
 
 
 def _spread(count: int, samples: int, *, odd: bool) -> list[int]:
@@ -398,18 +549,24 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
     frames = list(range(config.first, last + 1, config.frame_step))
     span = config.background_frames
     background_frames = background_sample(n_frames, config)
-    if span is not None:
+    plates = background_plates(config, cameras)
+    if config.plates_are_model:
+        kind = "photos" if config.background_images is not None else "clips"
+        background_text = (f"clean plates ({kind} of the empty scene) in {config.plate_folder}:"
+                           " each camera's own, every frame's exposure matched to them")
+        if len(plates) < len(cameras):
+            background_text += (f"; temporal median of {len(background_frames)} frames for "
+                                "the cameras without")
+    elif span is not None:
         background_text = (f"mean and spread of {len(background_frames)} empty-scene frames "
                            f"in {span[0]}-{span[1]}")
     else:
         background_text = (f"temporal median of {len(background_frames)} frames spread over "
                            f"0-{n_frames - 1}")
-    photos = (background_images(config.background_images, cameras)
-              if config.background_images is not None else {})
     settings = {**dataclasses.asdict(config), "last": last}
     fp = fingerprint(STEP, settings, _upstream_fingerprint(ws, cameras),
-                     {name: file_digest(path)
-                      for name, path in photos.items()})
+                     {name: [file_digest(path) for path in paths]
+                      for name, paths in plates.items()})
     outputs = [ws.silhouettes_dir / c.name for c in cameras]
     if done := ws.reusable(STEP, fp, *outputs, overwrite=overwrite):
         return dataclasses.replace(done, summary={**done.summary, "up_to_date": True})
@@ -430,7 +587,7 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
         jobs = [_CameraJob(root=ws.root.resolve(), camera=camera, frames=frames,
                            background_frames=background_frames, config=config,
                            out=tmp.resolve() / camera.name,
-                           background_image=photos.get(camera.name))
+                           plates=tuple(plates.get(camera.name, ())))
                 for camera in cameras]
         if map_cameras is not None:
             done = _silhouettes_as_tasks(map_cameras, jobs)
@@ -458,6 +615,11 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
                 per_camera[camera.name]["hull_removed"] = {
                     "median": float(np.median(result.removed)), "max": max(result.removed)}
             photo = result.background.photo
+            if result.background.plate is not None:
+                per_camera[camera.name]["plate"] = result.background.plate
+            if result.masks.gains:
+                per_camera[camera.name]["exposure_gain"] = {
+                    "min": min(result.masks.gains), "max": max(result.masks.gains)}
             if photo is not None:
                 per_camera[camera.name]["background_image"] = photo
                 if photo["gain"] is None:
@@ -465,19 +627,20 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
                         f"{camera.name}: background image {photo['image']} agrees with the "
                         f"video on only {photo['agreement']:.0%} of the pixels away from the "
                         "subject (another camera's, or the camera moved?): not used")
-            elif photos:
-                warnings.append(f"{camera.name}: no background image in "
-                                f"{config.background_images}: the temporal median alone")
+            elif plates and camera.name not in plates:
+                warnings.append(f"{camera.name}: no plate in {config.plate_folder}: the "
+                                "temporal median of its video (--median-fallback)")
             warnings.extend(_warnings(camera.name, empty, border, len(fractions),
-                                      config.frame_step, span is None))
+                                      config.frame_step,
+                                      span is None and not result.background.plate))
         recording.log_table(rec, "silhouettes/summary", "Foreground fraction per camera", [
             {"camera": name, "min": s["foreground_fraction"]["min"],
              "median": s["foreground_fraction"]["median"], "max": s["foreground_fraction"]["max"],
              "empty": len(s["empty_frames"]), "at border": len(s["border_frames"])}
             for name, s in per_camera.items()])
-    if photos:
+    if plates and not config.plates_are_model:
         background_text += (f", with the photos of {config.background_images} where the "
-                            "subject moved")
+                            "subject moved (--plates cluttered)")
     summary = {"cameras": per_camera, "frames": [config.first, last, config.frame_step],
                "processed": len(frames), "background": background_text,
                "background_frames": background_frames, "multi_view_check": check,
@@ -579,13 +742,20 @@ class _CameraJob:
     background_frames: list[int]
     config: SilhouettesConfig
     out: Path
-    background_image: Path | None = None
+    plates: tuple[Path, ...] = ()
+    """The camera's background plates (`background_plates`), none without."""
 
     def frames_job(self, frames: list[int], model: int = 0) -> _FramesJob:
         """The classification of ``frames`` (some of ``self.frames``) against the ``model``-th
         of the background models given with it."""
         return _FramesJob(root=self.root, camera=self.camera, frames=frames,
-                          thresholds=self.config.thresholds, out=self.out, model=model)
+                          thresholds=self.config.thresholds, out=self.out, model=model,
+                          exposure=self.plate_model)
+
+    @property
+    def plate_model(self) -> bool:
+        """Whether this camera's background is its clean plates."""
+        return bool(self.plates) and self.config.plates_are_model
 
 
 @dataclass(frozen=True)
@@ -600,6 +770,8 @@ class _FramesJob:
     out: Path
     model: int
     """Which of the background models given with the job is this camera's."""
+    exposure: bool = False
+    """Match each frame's exposure to the background (a plate) before classifying it."""
 
 
 @dataclass(frozen=True)
@@ -621,6 +793,8 @@ class _Background:
     """:func:`with_background_photo`'s account, with the image's name; None without a photo."""
     unknown: np.ndarray | None = None
     """(H, W) bool: pixels whose background is unknown (:func:`with_background_photo`)."""
+    plate: dict[str, Any] | None = None
+    """How the clean plates made the model (:func:`plate_model`, with the files' names)."""
 
 
 @dataclass(frozen=True)
@@ -631,12 +805,14 @@ class _FramesResult:
     fractions: list[float]
     empty: list[int]
     border: list[int]
+    gains: list[float] = field(default_factory=list)
+    """Per frame, the exposure gain matched to the plate (channel mean; empty: none)."""
 
     @classmethod
     def joined(cls, parts: Sequence[_FramesResult]) -> _FramesResult:
         """The results of consecutive runs of frames as one."""
         return cls([f for p in parts for f in p.fractions], [i for p in parts for i in p.empty],
-                   [i for p in parts for i in p.border])
+                   [i for p in parts for i in p.border], [g for p in parts for g in p.gains])
 
 
 @dataclass(frozen=True)
@@ -674,20 +850,57 @@ def camera_silhouettes(job: _CameraJob, progress: Any = None) -> _CameraResult:
 def camera_background(job: _CameraJob) -> _Background:
     """The background model of one camera: one independent task."""
     ws = Workspace(job.root)
-    frames = [frame for _, frame in read_frames(ws, job.camera.name, job.background_frames)]
-    for frame in frames:
-        if frame.shape[:2] != (job.camera.height, job.camera.width):
-            raise UserError(f"video {video_path(ws, job.camera.name).name} is "
-                            f"{frame.shape[1]}x{frame.shape[0]} but cameras.json says "
-                            f"{job.camera.width}x{job.camera.height} for camera {job.camera.name}")
+    if job.plate_model:
+        model, account = plate_model(job.plates, job.camera,
+                                     video=job.config.background_video is not None)
+        _check_plate(ws, job, model)
+        return _Background(model, None, plate={"files": [p.name for p in job.plates], **account})
+    frames = [_checked_size(ws, job.camera, frame)
+              for _, frame in read_frames(ws, job.camera.name, job.background_frames)]
     model = background_model(frames, job.config)
-    if job.background_image is None:
+    if not job.plates:
         return _Background(model, None)
-    photo = read_background_image(job.background_image, job.camera)
-    model, unknown, account = with_background_photo(model, frames, photo,
+    # --plates cluttered: a photo, the mean of the camera's photos, completes the median.
+    photo = np.mean([read_background_image(p, job.camera) for p in job.plates], axis=0)
+    model, unknown, account = with_background_photo(model, frames, photo.astype(np.uint8),
                                                     job.config.thresholds)
-    return _Background(model, {"image": job.background_image.name, **account},
+    return _Background(model, {"image": ", ".join(p.name for p in job.plates), **account},
                        unknown if unknown.any() else None)
+
+
+def _checked_size(ws: Workspace, camera: Camera, frame: np.ndarray) -> np.ndarray:
+    if frame.shape[:2] != (camera.height, camera.width):
+        raise UserError(f"video {video_path(ws, camera.name).name} is "
+                        f"{frame.shape[1]}x{frame.shape[0]} but cameras.json says "
+                        f"{camera.width}x{camera.height} for camera {camera.name}")
+    return frame
+
+
+def _check_plate(ws: Workspace, job: _CameraJob, model: BackgroundModel) -> None:
+    """A one-line error when the plates leave most of the image foreground in every one of a
+    few processed frames spread over the sequence (`_PLATE_MAX_FOREGROUND`)."""
+    x0, y0, x1, y1 = content_box(ws, job.camera)
+    sample = [job.frames[i] for i in _spread(len(job.frames), _PLATE_CHECK_FRAMES, odd=False)]
+    fractions = [float(_silhouette(_checked_size(ws, job.camera, frame), model,
+                                   job.config.thresholds, exposure=True)[0][y0:y1, x0:x1].mean())
+                 for _, frame in read_frames(ws, job.camera.name, sample)]  # fmt: skip
+    if fractions and min(fractions) > _PLATE_MAX_FOREGROUND:
+        names = ", ".join(p.name for p in job.plates[:3])
+        raise UserError(f"camera {job.camera.name}: its plate ({names}) differs from its video "
+                        f"on {min(fractions):.0%} of the image or more in each of "
+                        f"{len(fractions)} frames spread over it (another camera's plate, a "
+                        "camera that moved, or the subject in the plate?)")
+
+
+def _silhouette(frame: np.ndarray, model: BackgroundModel, thresholds: SilhouetteConfig, *,
+                exposure: bool) -> tuple[np.ndarray, float | None]:  # fmt: skip
+    """A frame's silhouette, with its exposure first matched to the model's when ``exposure``
+    (a plate); and that gain (channel mean), None without."""
+    if not exposure:
+        return silhouette_from_frame(frame, model, thresholds), None
+    gain = exposure_gain(frame, model, thresholds)
+    return (silhouette_from_frame(matched_exposure(frame, gain), model, thresholds),
+            float(np.mean(gain)))
 
 
 def frame_silhouettes(job: _FramesJob, models: Sequence[BackgroundModel], progress: Any = None
@@ -699,7 +912,9 @@ def frame_silhouettes(job: _FramesJob, models: Sequence[BackgroundModel], progre
     box = content_box(ws, job.camera)
     result = _FramesResult([], [], [])
     for index, frame in read_frames(ws, job.camera.name, job.frames):
-        mask = silhouette_from_frame(frame, model, job.thresholds)
+        mask, gain = _silhouette(frame, model, job.thresholds, exposure=job.exposure)
+        if gain is not None:
+            result.gains.append(gain)
         _write_mask(job.out / f"{index:06d}.png", mask)
         _stats(index, mask, box, result)
         if progress is not None:
@@ -763,7 +978,8 @@ def _checked_by_hull(map_fn: CameraMap | None, job: _HullJob, done: list[_Camera
                                             for run in frame_chunks(job.frames)], unknowns)
         progress.update(len(job.frames))
     return [dataclasses.replace(
-        result, masks=_FramesResult.joined([p[0][k] for p in parts]),
+        result, masks=dataclasses.replace(_FramesResult.joined([p[0][k] for p in parts]),
+                                          gains=result.masks.gains),
         removed=[r for p in parts for r in p[1][k]]) for k, result in enumerate(done)]
 
 
@@ -772,7 +988,8 @@ def _warnings(name: str, empty: list[int], border: list[int], processed: int, st
     out = []
     if empty and len(empty) == processed:
         hint = (" with a median background a subject who hardly moves is background: give "
-                "frames of the empty scene with --background frames:A-B" if median else "")
+                "plates of the empty scene (--background-images or --background-video) or "
+                "its frames (--background frames:A-B)" if median else "")
         out.append(f"{name}: every silhouette is empty (is the subject in view?{hint})")
     elif empty:
         out.append(f"{name}: empty silhouette in frame(s) {_ranges(empty, step)} (subject out "
@@ -798,6 +1015,14 @@ def summary_lines(ws: Workspace, record: StepRecord) -> list[str]:
                 f"{f['min']:.1%}, max {f['max']:.1%})")
         if "hull_removed" in cam:
             line += f"; the multi-view check removed {cam['hull_removed']['median']:.1%}"
+        plate = cam.get("plate")
+        if plate is not None:
+            line += f"; plate: {plate['model']}"
+            if "noise_sigma" in plate:
+                line += f" ({'/'.join(f'{v:.1f}' for v in plate['noise_sigma'])} grey levels)"
+        if "exposure_gain" in cam:
+            gain = cam["exposure_gain"]
+            line += f", exposure x{gain['min']:.2f}-{gain['max']:.2f} of it"
         photo = cam.get("background_image")
         if photo is not None and photo["gain"] is not None:
             line += (f"; photo on {photo['area']:.1%} of the image, background unknown on "

@@ -108,6 +108,33 @@ def _checked_frames(frames: Iterable[np.ndarray]) -> list[np.ndarray]:
     return checked
 
 
+PHOTO_MISALIGNMENT_PX = 0.5
+"""`BackgroundModel.from_photo`: how far, in pixels, a video frame's edges may sit from the
+photo's (half a pixel: sub-pixel vibration, and the video's resampling and compression)."""
+
+# Immerkaer's noise estimator: the difference of two Laplacians cancels image structure up to
+# second order; white Gaussian noise of sigma s gives a response of standard deviation 6 s.
+_IMMERKAER = np.float32([[1, -2, 1], [-2, 4, -2], [1, -2, 1]])
+
+
+def noise_sigma(image: np.ndarray) -> np.ndarray:
+    """Per channel, the standard deviation of an image's noise (C,) float: J. Immerkaer, "Fast
+    noise variance estimation", CVIU 64(2), 1996 (sigma = sqrt(pi / 2) / 6 x the mean absolute
+    response of the kernel), over the flatter half of the image (the pixels whose Sobel
+    gradient is at most its median, after Tai and Yang, 2008), so that edges and texture count
+    less."""
+    image = _as_hwc(image, "image").astype(np.float32)
+    out = np.empty(image.shape[2])
+    for c in range(image.shape[2]):
+        plane = image[..., c]
+        response = np.abs(cv2.filter2D(plane, cv2.CV_32F, _IMMERKAER)[1:-1, 1:-1])
+        gradient = (np.abs(cv2.Sobel(plane, cv2.CV_32F, 1, 0, ksize=3))
+                    + np.abs(cv2.Sobel(plane, cv2.CV_32F, 0, 1, ksize=3)))[1:-1, 1:-1]
+        flat = gradient <= np.median(gradient)
+        out[c] = float(np.mean(response[flat])) * math.sqrt(math.pi / 2) / 6.0
+    return out
+
+
 @dataclass(frozen=True)
 class BackgroundModel:
     """Per-pixel colour distribution of the empty scene.
@@ -140,22 +167,49 @@ class BackgroundModel:
     def from_frames(cls, frames: Iterable[np.ndarray]) -> BackgroundModel:
         """Mean and standard deviation of frames that show only the background (the thesis).
 
-        frames: N >= 1 images, each (H, W, C) or (H, W). One frame gives std 0 everywhere,
-        which the classification's `min_std` floor turns into a fixed grey-level threshold.
+        frames: N >= 1 images, each (H, W, C) or (H, W), read one at a time (a generator of
+        a whole clip's frames holds one frame in memory). One frame gives std 0 everywhere,
+        which the classification's `min_std` floor turns into a fixed grey-level threshold
+        (`from_photo` estimates a spread from one photo instead).
         """
-        checked = _checked_frames(frames)
         # Sums in float64: a float32 sum of squares over hundreds of 8-bit frames loses the
         # few grey levels of variance we are after.
-        total = np.zeros(checked[0].shape, np.float64)
-        total_sq = np.zeros(checked[0].shape, np.float64)
-        for frame in checked:
-            f = frame.astype(np.float64)
+        total = total_sq = None
+        n = 0
+        for i, frame in enumerate(frames):
+            f = _as_hwc(frame, f"frame {i}").astype(np.float64)
+            if total is None or total_sq is None:
+                total, total_sq = np.zeros(f.shape), np.zeros(f.shape)
+            elif f.shape != total.shape:
+                raise ValueError(f"frame {i} is {f.shape}, frame 0 is {total.shape}: "
+                                 "all frames must have the same size")
             total += f
             total_sq += f * f
-        n = len(checked)
+            n += 1
+        if total is None or total_sq is None:
+            raise ValueError("no frames given: the background model needs at least one frame")
         mean = total / n
         var = np.maximum(total_sq / n - mean * mean, 0.0)
         return cls(mean.astype(np.float32), np.sqrt(var).astype(np.float32))
+
+    @classmethod
+    def from_photo(cls, photo: np.ndarray, *, misalignment_px: float = PHOTO_MISALIGNMENT_PX
+                   ) -> BackgroundModel:  # fmt: skip
+        """The background of a single photo of the empty scene: its colours, and a spread
+        that one photo cannot measure, from a noise model: per channel, the image noise
+        (`noise_sigma`, one value over the image) combined with the change that a shift of
+        ``misalignment_px`` pixels makes at each pixel (that many times its gradient), so that
+        edges, where a video frame and a photo differ most (demosaicing, compression,
+        vibration), are not foreground.
+        """
+        image = _as_hwc(photo, "photo").astype(np.float32)
+        sigma = noise_sigma(image)
+        spread = np.empty_like(image)
+        for c in range(image.shape[2]):
+            gx = cv2.Sobel(image[..., c], cv2.CV_32F, 1, 0, ksize=3) / 8.0
+            gy = cv2.Sobel(image[..., c], cv2.CV_32F, 0, 1, ksize=3) / 8.0
+            spread[..., c] = np.sqrt(sigma[c] ** 2 + misalignment_px**2 * (gx * gx + gy * gy))
+        return cls(image, spread)
 
     @classmethod
     def from_sequence(cls, frames: Sequence[np.ndarray], thresholds: SilhouetteConfig | None = None,
@@ -476,6 +530,42 @@ def silhouette_from_frame(frame_bgr: np.ndarray, model: BackgroundModel,
     """
     config = config or SilhouetteConfig()
     return foreground_mask(classify(frame_bgr, model, config), config)
+
+
+EXPOSURE_GRID_PX = 4
+"""`exposure_gain` samples every this many pixels in both directions."""
+
+
+def exposure_gain(frame: np.ndarray, model: BackgroundModel, config: SilhouetteConfig | None = None
+                  ) -> np.ndarray:  # fmt: skip
+    """Per channel, the factor (C,) float by which a frame's exposure differs from a
+    background plate's (auto exposure, white balance, light that drifted since the plate was
+    taken): the median ratio of frame to background over the pixels of a sub-sampled grid,
+    then twice again over those that the ratio so far makes certainly background
+    (`classify`'s lower threshold), so that the subject, whatever its size, does not sway it.
+    Divide the frame by it before classifying (`matched_exposure`)."""
+    config = config or SilhouetteConfig()
+    g = EXPOSURE_GRID_PX
+    image = _checked_frame(frame, model)[::g, ::g].astype(np.float32)
+    mean = model.mean[::g, ::g]
+    std = np.maximum(model.std[::g, ::g], np.float32(config.min_std))
+    lit = (mean > 8.0).all(axis=2) & (image > 8.0).all(axis=2)  # no ratio in the dark
+    if not lit.any():
+        return np.ones(image.shape[2])
+    ratio = image[lit] / mean[lit]  # (M, C)
+    gain = np.median(ratio, axis=0)
+    for _ in range(2):
+        agree = (np.abs(image[lit] / gain - mean[lit]) < config.lower_sigma * std[lit]).all(1)
+        if agree.sum() < max(16, agree.size // 20):
+            break
+        gain = np.median(ratio[agree], axis=0)
+    return gain.astype(np.float64)
+
+
+def matched_exposure(frame: np.ndarray, gain: np.ndarray) -> np.ndarray:
+    """The uint8 frame (H, W, C) divided by its `exposure_gain` (rounded, saturated)."""
+    return cv2.multiply(frame, tuple(float(1.0 / v) for v in gain) + (0.0,) * (4 - len(gain)),
+                        dtype=cv2.CV_8U)
 
 
 # ---------------------------------------------------------------------------------------------
