@@ -14,27 +14,28 @@ The background model of each camera comes from one of four sources (the README s
 use when). **Background plates**, recorded before the subject walks in: photos
 (``--background-images``) or a clip (``--background-video``) of the empty scene per camera
 (`background_plates` pairs them with the cameras by name). With ``--plates clean`` (the
-default) they are the model (6.2.1): the mean and standard deviation of a camera's photos or
-of all its clip's frames (`plate_model`); one photo cannot show its own spread, which a noise
-model stands in for (`BackgroundModel.from_photo`: the photo's measured noise, and half a
-pixel of misalignment at edges). Each frame's exposure is matched to the plate
-(`tracking.silhouettes.subtraction.exposure_gain`) before it is classified, and the plates
-are refused in one line when they leave most of the image foreground in every one of a few
-frames spread over the video (another camera's plate, a camera that moved). A camera without
-a plate, when the others have one, is refused unless ``--median-fallback``. With ``--plates
-cluttered`` (photos that may show people or objects the video does not, as the Pose2Sim
-demo's calibration shots do), the median below stays the model and the photos complete it
-where the subject moved (`with_background_photo`). Without plates, either the per-pixel mean
-and standard deviation of frames that show the empty scene (``--background frames:A-B``, the thesis' method; at most
-``--background-samples`` of them, spread over A-B), or, when no such frames exist (the Pose2Sim
-demo), the temporal median and median absolute deviation of ``--background-samples`` frames
-spread evenly over the whole video (``--background median``), then again over the frames
-where each pixel is not foreground (``--background-passes``; `BackgroundModel.from_sequence`):
-right wherever the subject covers a pixel in fewer than half of them, so a subject who hardly
-moves becomes background. `background_sample` and `background_model` are that choice and that
-model, which benchmarks/silhouettes_cdnet.py scores. Each processed frame is then classified
-(`tracking.silhouettes.subtraction`:
-foreground / background / shadow thresholds, morphological clean-up) at full resolution.
+default) they are the model (6.2.1): the mean and standard deviation of a camera's photos, or
+the median and spread of frames spread over its clip (`plate_model`); one photo cannot show its
+own spread, which a noise model stands in for (`BackgroundModel.from_photo`: the photo's
+measured noise, and half a pixel of misalignment at edges). Each frame's exposure is matched to
+the plate (`tracking.silhouettes.subtraction.exposure_gain`) before it is classified, and the
+plates are refused in one line when they leave most of the image foreground in every one of a
+few frames spread over the video (another camera's plate, a camera that moved). A camera
+without a plate, when the others have one, is refused unless ``--median-fallback``. With
+``--plates cluttered`` (photos that may show people or objects the video does not, as the
+Pose2Sim demo's calibration shots do), the median below stays the model and the photos complete
+it where the subject moved (`with_background_photo`). Without plates, either the per-pixel mean
+and standard deviation of frames that show the empty scene (``--background frames:A-B``, the
+thesis' method; at most ``--background-samples`` of them, spread over A-B), or, when no such
+frames exist (the Pose2Sim demo), the temporal median and median absolute deviation of
+``--background-samples`` frames spread evenly over the whole video (``--background median``),
+then again over the frames where each pixel is not foreground (``--background-passes``;
+`BackgroundModel.from_sequence`): right wherever the subject covers a pixel in fewer than half
+of them, so a subject who hardly moves becomes background. `background_sample` and
+`background_model` are that choice and that model (benchmarks/silhouettes_cdnet.py scores
+the whole step). Each processed frame is then classified
+(`tracking.silhouettes.subtraction`: foreground / background / shadow thresholds,
+morphological clean-up) at full resolution.
 
 ``--first``, ``--last`` and ``--frame-step`` choose the processed frames. The summary gives per
 camera the foreground fraction (min / median / max over frames) and lists frames whose
@@ -158,7 +159,9 @@ class SilhouettesConfig:
         metadata={"metavar": "DIR",
                   "help": "folder of background clips: a video of the empty scene per "
                   "camera, named like the camera's video (cam01.mp4, or a subfolder cam01/); "
-                  "the background model is the mean and spread over all its frames"},
+                  "the background model is the median and spread of --background-samples "
+                  "frames spread over it (its mean and spread when it is clean, and still the "
+                  "empty scene when someone walked through it)"},
     )  # fmt: skip
     plates: Plates = field(
         default=Plates.CLEAN,
@@ -444,13 +447,20 @@ def plate_at_video_size(image: np.ndarray, camera: Camera, path: Path) -> np.nda
     return cv2.warpAffine(image, warp, (camera.width, camera.height), flags=cv2.INTER_LINEAR)
 
 
-def plate_model(paths: Sequence[Path], camera: Camera, *, video: bool
-                ) -> tuple[BackgroundModel, dict[str, Any]]:  # fmt: skip
+def plate_model(paths: Sequence[Path], camera: Camera, config: SilhouettesConfig, *,
+                video: bool) -> tuple[BackgroundModel, dict[str, Any]]:  # fmt: skip
     """The background model of one camera's clean plates and how it was made (``model``,
-    ``frames``, and for one photo its ``noise_sigma`` per channel): photos (``video``
-    False) or the frames of clips, each at the video's size (`plate_at_video_size`). Two
-    photos or more, or clip frames: their mean and standard deviation
-    (`BackgroundModel.from_frames`, frames streamed); one photo: `BackgroundModel.from_photo`.
+    ``frames``, and for one photo its ``noise_sigma`` per channel), each plate at the video's
+    size (`plate_at_video_size`):
+
+    * photos (``video`` False): two or more, their mean and standard deviation
+      (`BackgroundModel.from_frames`); one, `BackgroundModel.from_photo`;
+    * clips: ``background_samples`` frames (rounded up to odd) spread over all of the
+      camera's clips, their temporal median and spread with ``background_passes`` passes
+      (`BackgroundModel.from_sequence`, as the median background): the mean and standard
+      deviation of a clean clip, and still the empty scene when someone walked through it
+      (on CDnet highway, a clip of the 469 frames before the scored range, cars passing in
+      all of them: F 0.335 with the mean and spread of every frame).
     """
     if not video:
         photos = [read_background_image(p, camera) for p in paths]
@@ -462,18 +472,19 @@ def plate_model(paths: Sequence[Path], camera: Camera, *, video: bool
                            "noise_sigma": sigma}
         return BackgroundModel.from_frames(photos), {
             "model": f"mean and spread of {len(photos)} photos", "frames": len(photos)}
-    count = 0
-
-    def frames() -> Iterator[np.ndarray]:
-        nonlocal count
-        for path in paths:
-            for _, frame in read_video_frames(path):
-                count += 1
-                yield plate_at_video_size(frame, camera, path)
-
-    model = BackgroundModel.from_frames(frames())
+    counts = [video_info(path)[0] for path in paths]
+    starts = np.cumsum([0, *counts])
+    picked = _spread(int(starts[-1]), config.background_samples, odd=True)
+    frames = []
+    for k, path in enumerate(paths):
+        local = [i - int(starts[k]) for i in picked if starts[k] <= i < starts[k + 1]]
+        frames += [plate_at_video_size(frame, camera, path)
+                   for _, frame in read_video_frames(path, local)]
+    model = BackgroundModel.from_sequence(frames, config.thresholds,
+                                          passes=config.background_passes)
     clips = f"{len(paths)} clips" if len(paths) > 1 else "its clip"
-    return model, {"model": f"mean and spread of {count} frames of {clips}", "frames": count}
+    return model, {"model": f"median and spread of {len(frames)} frames spread over {clips} "
+                   f"({int(starts[-1])} frames)", "frames": len(frames)}
 
 
 _PLATE_CHECK_FRAMES = 5
@@ -851,7 +862,7 @@ def camera_background(job: _CameraJob) -> _Background:
     """The background model of one camera: one independent task."""
     ws = Workspace(job.root)
     if job.plate_model:
-        model, account = plate_model(job.plates, job.camera,
+        model, account = plate_model(job.plates, job.camera, job.config,
                                      video=job.config.background_video is not None)
         _check_plate(ws, job, model)
         return _Background(model, None, plate={"files": [p.name for p in job.plates], **account})

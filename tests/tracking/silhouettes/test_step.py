@@ -222,8 +222,8 @@ def test_clean_plates_are_the_background_of_a_subject_who_stays_put(tmp_path: Pa
     assert record.summary["background"].startswith("clean plates (photos of the empty scene)")
     lines = summary_lines(ws, record)
     assert any("plate: one photo" in line and "exposure x1.05-1.05" in line for line in lines)
-    # The same plates as a clip per camera (a few frames of the photo, noise added): the mean
-    # and spread over its frames.
+    # The same plates as a clip per camera (a few frames of the photo, noise added): the median
+    # and spread of its frames.
     clips = tmp_path / "clips"
     clips.mkdir()
     rng = np.random.default_rng(3)
@@ -238,7 +238,7 @@ def test_clean_plates_are_the_background_of_a_subject_who_stays_put(tmp_path: Pa
         scores = [iou(read_mask(folder / f"{i:06d}.png"), m) for i, m in enumerate(masks)]
         assert np.median(scores) >= (0.92 if k else 0.85), scores
         plate = video.summary["cameras"][f"cam{k:02d}"]["plate"]
-        assert plate["model"] == "mean and spread of 6 frames of its clip"
+        assert plate["model"] == "median and spread of 5 frames spread over its clip (6 frames)"
 
 
 def test_background_plates_name_their_camera_as_a_word(tmp_path: Path):
