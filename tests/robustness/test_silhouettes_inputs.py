@@ -81,6 +81,24 @@ def _missing_plate(folder: Path) -> None:
     (folder / "plates" / "cam02.png").unlink()
 
 
+def _cluttered_plate(folder: Path) -> None:
+    """cam00's plate shows a box at the left edge that the video never does."""
+    path = folder / "plates" / "cam00.png"
+    image = cv2.imread(str(path))
+    image[40:110, :30] = (200, 60, 20)
+    cv2.imwrite(str(path), image)
+
+
+def _clutter_hinted(folder: Path, result: subprocess.CompletedProcess[str]) -> None:
+    summary = json.loads((folder / "ws" / "run.json").read_text())["steps"]["silhouettes"][
+        "summary"]
+    hint = ("cam00: silhouette touches the image border in every frame (does the plate show "
+            "people or objects the video does not? then --plates cluttered)")
+    assert hint in summary["warnings"] and hint in result.stdout
+    # The blob crossing the views touches the border only as it enters and leaves.
+    assert not any("every frame" in w for w in summary["warnings"] if not w.startswith("cam00"))
+
+
 def _nothing_written(folder: Path, result: subprocess.CompletedProcess[str]) -> None:
     ws = folder / "ws"
     assert not (ws / "silhouettes").exists() and not (ws / "silhouettes.partial").exists()
@@ -119,6 +137,8 @@ ROWS = [
                  r"give --median-fallback", inputs=INPUTS, then=_nothing_written),
     Case("camera-without-plate-falls-back", lambda f: (*IMAGES, "--median-fallback"),
          _with(_missing_plate), rc=0, inputs=INPUTS, then=_fell_back),
+    Case("plate-shows-what-the-video-does-not", lambda f: (*IMAGES, "--no-multi-view-check"),
+         _with(_cluttered_plate), rc=0, inputs=INPUTS, then=_clutter_hinted),
     Case("plates-of-both-kinds", lambda f: (*IMAGES, "--background-video", "clips"), _with(),
          message=r"give --background-images or --background-video, not both",
          inputs=INPUTS, then=_nothing_written),

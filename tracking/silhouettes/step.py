@@ -643,7 +643,8 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
                                 "temporal median of its video (--median-fallback)")
             warnings.extend(_warnings(camera.name, empty, border, len(fractions),
                                       config.frame_step,
-                                      span is None and not result.background.plate))
+                                      span is None and not result.background.plate,
+                                      plate=result.background.plate is not None))
         recording.log_table(rec, "silhouettes/summary", "Foreground fraction per camera", [
             {"camera": name, "min": s["foreground_fraction"]["min"],
              "median": s["foreground_fraction"]["median"], "max": s["foreground_fraction"]["max"],
@@ -995,7 +996,7 @@ def _checked_by_hull(map_fn: CameraMap | None, job: _HullJob, done: list[_Camera
 
 
 def _warnings(name: str, empty: list[int], border: list[int], processed: int, step: int,
-              median: bool) -> list[str]:  # fmt: skip
+              median: bool, *, plate: bool = False) -> list[str]:  # fmt: skip
     out = []
     if empty and len(empty) == processed:
         hint = (" with a median background a subject who hardly moves is background: give "
@@ -1005,7 +1006,12 @@ def _warnings(name: str, empty: list[int], border: list[int], processed: int, st
     elif empty:
         out.append(f"{name}: empty silhouette in frame(s) {_ranges(empty, step)} (subject out "
                    "of view?)")
-    if border:
+    if border and plate and len(border) == processed:
+        # Clean plates that show what the video does not (the Pose2Sim demo's calibration
+        # shots: people, a moved chair) leave it foreground in every frame, often at the edge.
+        out.append(f"{name}: silhouette touches the image border in every frame (does the plate "
+                   "show people or objects the video does not? then --plates cluttered)")
+    elif border:
         out.append(f"{name}: silhouette touches the image border in frame(s) "
                    f"{_ranges(border, step)} (subject leaving the view?)")
     return out
