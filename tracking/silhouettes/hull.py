@@ -92,18 +92,18 @@ _BLOCK = 4
 def hull_candidates(cameras: Sequence[Camera], masks: Sequence[np.ndarray], centre: np.ndarray,
                     size_m: float, voxel_m: float, *, dilate_px: int = 0,
                     boxes: Sequence[Box | None] | None = None, min_views: int | None = None,
-                    unknown: Sequence[np.ndarray | None] | None = None,
+                    unknown: Sequence[np.ndarray | None] | None = None, misses: int = 0,
                     ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """(points (M, 3), index (M,)): the voxels of :func:`voxel_centres`' cube (``index`` into
     its C order, increasing) that :func:`carve`, with the same arguments, could keep; every
     other voxel it would carve away.
 
     Coarse to fine: the cube is cut into blocks of ``_BLOCK``³ voxels, and a block goes when
-    one view sees the whole of it and its projection lies farther from the view's (dilated)
-    silhouette than the block's projected radius (a distance transform per view), or when
-    fewer views than ``min_views`` can see any of it. The test is conservative (the radius is
-    bounded off the axis, enlarged by a quarter for the distortion and by 2 px for the pixel
-    grid), so that carving
+    more than ``misses`` views each see the whole of it and its projection lies farther from
+    the view's (dilated) silhouette than the block's projected radius (a distance transform
+    per view), or when fewer views than ``min_views`` can see any of it, less those that
+    rejected it. The test is conservative (the radius is bounded off the axis, enlarged by a
+    quarter for the distortion and by 2 px for the pixel grid), so that carving
     the candidates gives the very hull the whole cube gives, in about a hundredth of the
     projections (a body fills ~1% of a 3 m cube)."""
     n = int(np.ceil(size_m / voxel_m))
@@ -117,7 +117,7 @@ def hull_candidates(cameras: Sequence[Camera], masks: Sequence[np.ndarray], cent
     reach_m = math.sqrt(3) * float((axis[last] - axis[first]).max()) / 2
     masks = _with_unknown(masks, unknown)
     boxes = list(boxes) if boxes is not None else [None] * len(cameras)
-    keep = np.ones(len(blocks), bool)
+    rejected = np.zeros(len(blocks), np.int32)
     may_see = np.zeros(len(blocks), np.int32)
     views = 0
     for cam, mask, box in zip(cameras, masks, boxes, strict=True):
@@ -151,9 +151,10 @@ def hull_candidates(cameras: Sequence[Camera], masks: Sequence[np.ndarray], cent
                       | (uv[:, 1] - radius >= y1))))  # fmt: skip
         col = np.where(whole, uv[:, 0], 0).astype(np.int64)
         row = np.where(whole, uv[:, 1], 0).astype(np.int64)
-        keep &= ~(whole & (distance[row, col] > radius))
+        rejected += whole & (distance[row, col] > radius)
         may_see += partly
-    keep &= may_see >= max(2, views if min_views is None else min_views)
+    enough = may_see - rejected >= max(2, views if min_views is None else min_views)
+    keep = (rejected <= misses) & enough
     nb = len(first)
     bi, bj, bk = np.unravel_index(np.flatnonzero(keep), (nb, nb, nb))
     offsets = np.stack(np.meshgrid(*[np.arange(_BLOCK)] * 3, indexing="ij"), -1).reshape(-1, 3)
@@ -196,18 +197,19 @@ def project_voxels(camera: Camera, points: np.ndarray, box: Box | None = None) -
 def carve(cameras: Sequence[Camera], masks: Sequence[np.ndarray], points: np.ndarray, *,
           dilate_px: int = 0, boxes: Sequence[Box | None] | None = None,
           min_views: int | None = None, unknown: Sequence[np.ndarray | None] | None = None,
-          ) -> tuple[np.ndarray, list[Projection]]:  # fmt: skip
+          misses: int = 0) -> tuple[np.ndarray, list[Projection]]:  # fmt: skip
     """(N,) bool: the voxels (N, 3) inside the visual hull of the non-empty ``masks``, each
     dilated by a disc of ``dilate_px`` pixels first (0: exact); and each view's projection.
 
     A voxel is kept when every non-empty view that sees it (:func:`project_voxels`) has it in
-    its silhouette and at least ``min_views`` such views see it (default: all the non-empty
+    its silhouette, but for at most ``misses`` of them, and at least ``min_views`` views have
+    it in their silhouette (default: all the non-empty
     views; never fewer than two). ``unknown``: per view, None or (H, W) bool pixels whose
     label the view cannot tell: they count as silhouette (they do not carve).
     """
     masks = _with_unknown(masks, unknown)
     boxes = list(boxes) if boxes is not None else [None] * len(cameras)
-    inside = np.ones(len(points), bool)
+    outside = np.zeros(len(points), np.int32)
     seen_by = np.zeros(len(points), np.int32)
     projections = []
     for cam, mask, box in zip(cameras, masks, boxes, strict=True):
@@ -219,10 +221,11 @@ def carve(cameras: Sequence[Camera], masks: Sequence[np.ndarray], points: np.nda
             disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (dilate_px, dilate_px))
             mask = cv2.dilate(mask.astype(np.uint8), disc).astype(bool)
         hit = mask[proj.row, proj.col] & proj.seen
-        inside &= hit | ~proj.seen
+        outside += proj.seen & ~hit
         seen_by += proj.seen
     views = sum(bool(m.any()) for m in masks)
-    return inside & (seen_by >= max(2, views if min_views is None else min_views)), projections
+    enough = seen_by - outside >= max(2, views if min_views is None else min_views)
+    return (outside <= misses) & enough, projections
 
 
 def _with_unknown(masks: Sequence[np.ndarray], unknown: Sequence[np.ndarray | None] | None
@@ -277,6 +280,14 @@ class HullCheckConfig:
         metadata={"help": "silhouettes are dilated by this fraction of the image's larger side "
                   "before the carving, so that a part one view segments too thin is kept"},
     )  # fmt: skip
+    check_misses: int = field(
+        default=0,
+        metadata={"help": "views that may see a voxel of the consistency hull outside their "
+                  "silhouette (at most the views with a silhouette less two): with 1, a part "
+                  "one camera loses (the subject in its median background, a limb the colour "
+                  "of the wall) stays in the others, but more of a blob attached to the "
+                  "subject in one view stays too"},
+    )  # fmt: skip
     check_voxel_m: float = field(
         default=0.03, metadata={"help": "voxel size of the consistency hull, metres"})
     check_size_m: float = field(
@@ -289,6 +300,8 @@ class HullCheckConfig:
     def __post_init__(self) -> None:
         if not 0 <= self.check_tolerance < 0.5:
             raise UserError(f"--check-tolerance must be in [0, 0.5), got {self.check_tolerance}")
+        if self.check_misses < 0:
+            raise UserError(f"--check-misses must be >= 0, got {self.check_misses}")
         if not self.check_voxel_m > 0:
             raise UserError(f"--check-voxel-m must be > 0, got {self.check_voxel_m}")
         check_voxel_grid(self.check_size_m, self.check_voxel_m, "--check-size-m",
@@ -322,7 +335,7 @@ def consistent_silhouettes(cameras: Sequence[Camera], masks: Sequence[np.ndarray
     # whose rays only one other camera sees (behind the subject, below the floor) does not.
     views = sum(bool(m.any()) for m in masks)
     settings = {"dilate_px": dilate, "boxes": boxes, "min_views": max(2, views - 1),
-                "unknown": unknown}
+                "unknown": unknown, "misses": max(0, min(config.check_misses, views - 2))}
     points, _ = hull_candidates(cameras, masks, rays_meeting_point(cameras, masks),
                                 config.check_size_m, config.check_voxel_m, **settings)
     kept, projections = carve(cameras, masks, points, **settings)
