@@ -760,8 +760,11 @@ class _CameraJob:
     def frames_job(self, frames: list[int], model: int = 0) -> _FramesJob:
         """The classification of ``frames`` (some of ``self.frames``) against the ``model``-th
         of the background models given with it."""
+        thresholds = self.config.thresholds
+        if thresholds.edge_band_px is None:  # the outline is refined against clean plates
+            thresholds = dataclasses.replace(thresholds, edge_band_px=int(self.plate_model))
         return _FramesJob(root=self.root, camera=self.camera, frames=frames,
-                          thresholds=self.config.thresholds, out=self.out, model=model,
+                          thresholds=thresholds, out=self.out, model=model,
                           exposure=self.plate_model)
 
     @property
