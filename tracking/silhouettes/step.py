@@ -760,17 +760,23 @@ class _CameraJob:
     def frames_job(self, frames: list[int], model: int = 0) -> _FramesJob:
         """The classification of ``frames`` (some of ``self.frames``) against the ``model``-th
         of the background models given with it."""
-        thresholds = self.config.thresholds
-        if thresholds.edge_band_px is None:  # the outline is refined against clean plates
-            thresholds = dataclasses.replace(thresholds, edge_band_px=int(self.plate_model))
         return _FramesJob(root=self.root, camera=self.camera, frames=frames,
-                          thresholds=thresholds, out=self.out, model=model,
-                          exposure=self.plate_model)
+                          thresholds=self.thresholds, out=self.out, model=model,
+                          exposure=self.uses_plates)
 
     @property
-    def plate_model(self) -> bool:
+    def uses_plates(self) -> bool:
         """Whether this camera's background is its clean plates."""
         return bool(self.plates) and self.config.plates_are_model
+
+    @property
+    def thresholds(self) -> SilhouetteConfig:
+        """The classification settings of this camera's frames: the config's, with the
+        outline refined against clean plates unless ``edge_band_px`` says otherwise."""
+        thresholds = self.config.thresholds
+        if thresholds.edge_band_px is None:
+            thresholds = dataclasses.replace(thresholds, edge_band_px=int(self.uses_plates))
+        return thresholds
 
 
 @dataclass(frozen=True)
@@ -865,7 +871,7 @@ def camera_silhouettes(job: _CameraJob, progress: Any = None) -> _CameraResult:
 def camera_background(job: _CameraJob) -> _Background:
     """The background model of one camera: one independent task."""
     ws = Workspace(job.root)
-    if job.plate_model:
+    if job.uses_plates:
         model, account = plate_model(job.plates, job.camera, job.config,
                                      video=job.config.background_video is not None)
         _check_plate(ws, job, model)
@@ -897,7 +903,7 @@ def _check_plate(ws: Workspace, job: _CameraJob, model: BackgroundModel) -> None
     x0, y0, x1, y1 = content_box(ws, job.camera)
     sample = [job.frames[i] for i in _spread(len(job.frames), _PLATE_CHECK_FRAMES, odd=False)]
     fractions = [float(_silhouette(_checked_size(ws, job.camera, frame), model,
-                                   job.config.thresholds, exposure=True)[0][y0:y1, x0:x1].mean())
+                                   job.thresholds, exposure=True)[0][y0:y1, x0:x1].mean())
                  for _, frame in read_frames(ws, job.camera.name, sample)]  # fmt: skip
     if fractions and min(fractions) > _PLATE_MAX_FOREGROUND:
         names = ", ".join(p.name for p in job.plates[:3])

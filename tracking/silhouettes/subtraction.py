@@ -171,27 +171,20 @@ class BackgroundModel:
     def from_frames(cls, frames: Iterable[np.ndarray]) -> BackgroundModel:
         """Mean and standard deviation of frames that show only the background (the thesis).
 
-        frames: N >= 1 images, each (H, W, C) or (H, W), read one at a time (a generator of
-        a whole clip's frames holds one frame in memory). One frame gives std 0 everywhere,
+        frames: N >= 1 images, each (H, W, C) or (H, W). One frame gives std 0 everywhere,
         which the classification's `min_std` floor turns into a fixed grey-level threshold
         (`from_photo` estimates a spread from one photo instead).
         """
+        checked = _checked_frames(frames)
         # Sums in float64: a float32 sum of squares over hundreds of 8-bit frames loses the
         # few grey levels of variance we are after.
-        total = total_sq = None
-        n = 0
-        for i, frame in enumerate(frames):
-            f = _as_hwc(frame, f"frame {i}").astype(np.float64)
-            if total is None or total_sq is None:
-                total, total_sq = np.zeros(f.shape), np.zeros(f.shape)
-            elif f.shape != total.shape:
-                raise ValueError(f"frame {i} is {f.shape}, frame 0 is {total.shape}: "
-                                 "all frames must have the same size")
+        total = np.zeros(checked[0].shape, np.float64)
+        total_sq = np.zeros(checked[0].shape, np.float64)
+        for frame in checked:
+            f = frame.astype(np.float64)
             total += f
             total_sq += f * f
-            n += 1
-        if total is None or total_sq is None:
-            raise ValueError("no frames given: the background model needs at least one frame")
+        n = len(checked)
         mean = total / n
         var = np.maximum(total_sq / n - mean * mean, 0.0)
         return cls(mean.astype(np.float32), np.sqrt(var).astype(np.float32))

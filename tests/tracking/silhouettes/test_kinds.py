@@ -27,6 +27,7 @@ import numpy as np
 import pytest
 
 from recon.workspace import Workspace
+from tests.tracking.test_capture import Synthetic
 from tracking.body.bvh import write_bvh
 from tracking.body.model import BodyShape
 from tracking.body.motion import motion_from_poses
@@ -43,24 +44,7 @@ MJPG_MEDIAN, MJPG_WORST = 0.85, 0.75
 DRIFT_END_BGR = (0.78, 0.80, 0.82)
 
 
-@dataclass(frozen=True)
-class Scene:
-    root: Path
-
-    @property
-    def videos(self) -> Path:
-        return self.root / "render" / "videos"
-
-    @property
-    def plates(self) -> Path:
-        return self.root / "render" / "backgrounds"
-
-    @property
-    def calibration(self) -> Path:
-        return self.root / "cameras.json"
-
-
-def synthetic_scene(folder: Path, *, walk: bool) -> Scene:
+def synthetic_scene(folder: Path, *, walk: bool) -> Synthetic:
     """A 1.70 m subject filmed by cam00 (+Z) and cam01 (-Z): walking along +X at 1.2 m/s, so
     across both images, 12 frames at 6 Hz (2.2 m); or standing still (the walk's first pose,
     held) for 12 frames at 30 Hz."""
@@ -73,7 +57,7 @@ def synthetic_scene(folder: Path, *, walk: bool) -> Scene:
     write_bvh(motion_from_poses(poses, shape, 1 / rate), bvh)
     synthesize(folder / "synth", SynthConfig(bvh=bvh, cameras=2, size=SIZE, step=1, clean=True,
                                              videos=True))  # fmt: skip
-    return Scene(folder / "synth")
+    return Synthetic(folder / "synth")
 
 
 def drifted_videos(videos: Path, out: Path) -> Path:
@@ -98,7 +82,7 @@ def drifted_videos(videos: Path, out: Path) -> Path:
     return out
 
 
-def lossless_videos(scene: Scene, out: Path) -> Path:
+def lossless_videos(scene: Synthetic, out: Path) -> Path:
     """``out/<camera>.avi`` (FFV1): the frames of the scene's videos composited again, as
     `tracking.rig.synth_video.SyntheticVideos` does, from the exact renders."""
     out.mkdir()
@@ -108,7 +92,7 @@ def lossless_videos(scene: Scene, out: Path) -> Path:
                  for p in sorted(folder.glob("[0-9]*.png"))]  # fmt: skip
         height, width = masks[0].shape
         backdrop = scene_background(width, height, 17 * k)  # synth's seed 0, camera k
-        assert np.array_equal(backdrop, cv2.imread(str(scene.plates / f"{folder.name}.png")))
+        assert np.array_equal(backdrop, cv2.imread(str(scene.backgrounds / f"{folder.name}.png")))
         cloth = cloth_texture(width, height, 17 * k)
         writer = cv2.VideoWriter(str(out / f"{folder.name}.avi"), cv2.VideoWriter_fourcc(*"FFV1"),
                                  30.0, (width, height))  # fmt: skip
@@ -120,12 +104,12 @@ def lossless_videos(scene: Scene, out: Path) -> Path:
 
 
 @pytest.fixture(scope="module")
-def still(tmp_path_factory: pytest.TempPathFactory) -> Scene:
+def still(tmp_path_factory: pytest.TempPathFactory) -> Synthetic:
     return synthetic_scene(tmp_path_factory.mktemp("kinds") / "still", walk=False)
 
 
 @pytest.fixture(scope="module")
-def walk(tmp_path_factory: pytest.TempPathFactory) -> Scene:
+def walk(tmp_path_factory: pytest.TempPathFactory) -> Synthetic:
     return synthetic_scene(tmp_path_factory.mktemp("kinds") / "walk", walk=True)
 
 
@@ -137,7 +121,7 @@ class Scores:
     """Frames whose truth shows the subject but whose silhouette is empty."""
 
 
-def scores(ws: Workspace, truth: Scene) -> Scores:
+def scores(ws: Workspace, truth: Synthetic) -> Scores:
     """Per camera, the IoU of every silhouette of ``ws`` with the exact render of its frame."""
     median, worst, empty = {}, {}, {}
     for folder in sorted(p for p in (truth.root / "silhouettes").iterdir() if p.is_dir()):
@@ -163,24 +147,24 @@ def assert_found(result: Scores, median: float = MJPG_MEDIAN, worst: float = MJP
     assert not any(result.empty.values()), result
 
 
-def test_a_subject_who_keeps_still_is_found_against_the_plate(still: Scene, tmp_path: Path):
+def test_a_subject_who_keeps_still_is_found_against_the_plate(still: Synthetic, tmp_path: Path):
     ws = init_video(tmp_path / "ws", still.videos, still.calibration)
-    record = make_silhouettes(ws, SilhouettesConfig(background_images=still.plates))
+    record = make_silhouettes(ws, SilhouettesConfig(background_images=still.backgrounds))
     assert_found(scores(ws, still))
     assert not record.summary["warnings"]
 
 
-def test_a_subject_who_keeps_still_meets_the_target_without_the_codec(still: Scene,
+def test_a_subject_who_keeps_still_meets_the_target_without_the_codec(still: Synthetic,
                                                                       tmp_path: Path):  # fmt: skip
     """The same frames, lossless: what is left is the step's own error (the gaps between the
     arms and the trunk and between the legs that its closing fills)."""
     ws = init_video(tmp_path / "ws", lossless_videos(still, tmp_path / "lossless"),
                     still.calibration)  # fmt: skip
-    make_silhouettes(ws, SilhouettesConfig(background_images=still.plates))
+    make_silhouettes(ws, SilhouettesConfig(background_images=still.backgrounds))
     assert_found(scores(ws, still), TARGET, TARGET)
 
 
-def test_a_subject_who_keeps_still_is_lost_by_the_median(still: Scene, tmp_path: Path):
+def test_a_subject_who_keeps_still_is_lost_by_the_median(still: Synthetic, tmp_path: Path):
     """Why plates exist: held still, the subject is its own temporal median, the background;
     the silhouettes are empty (or nearly) in every frame of every camera."""
     ws = init_video(tmp_path / "ws", still.videos, still.calibration)
@@ -194,18 +178,18 @@ def test_a_subject_who_keeps_still_is_lost_by_the_median(still: Scene, tmp_path:
                    for w in record.summary["warnings"]), record.summary["warnings"]  # fmt: skip
 
 
-def test_a_subject_who_walks_across_is_found_by_the_median(walk: Scene, tmp_path: Path):
+def test_a_subject_who_walks_across_is_found_by_the_median(walk: Synthetic, tmp_path: Path):
     ws = init_video(tmp_path / "ws", walk.videos, walk.calibration)
     make_silhouettes(ws, SilhouettesConfig())
     assert_found(scores(ws, walk))
 
 
-def test_an_exposure_drift_is_matched_to_the_plate(still: Scene, tmp_path: Path):
+def test_an_exposure_drift_is_matched_to_the_plate(still: Synthetic, tmp_path: Path):
     """The light dims by ~20% over the clip (per channel slightly differently); the plate was
     taken at the start's exposure. Each frame's gain to the plate is measured and undone."""
     videos = drifted_videos(still.videos, tmp_path / "drift")
     ws = init_video(tmp_path / "ws", videos, still.calibration)
-    record = make_silhouettes(ws, SilhouettesConfig(background_images=still.plates))
+    record = make_silhouettes(ws, SilhouettesConfig(background_images=still.backgrounds))
     assert_found(scores(ws, still))
     for name, camera in record.summary["cameras"].items():
         gain = camera["exposure_gain"]

@@ -54,7 +54,7 @@ def test_one_photo_spreads_by_its_noise_and_more_at_edges():
     assert silhouette_from_frame(noisy(shifted, 2.0, seed=3), model).mean() < 0.002
 
 
-def test_the_mean_and_spread_of_a_clip_are_streamed():
+def test_the_mean_and_spread_of_photos_take_any_iterable():
     frames = [noisy(scene(), 4.0, seed=s) for s in range(12)]
     listed = BackgroundModel.from_frames(frames)
     streamed = BackgroundModel.from_frames(f for f in frames)
