@@ -196,6 +196,7 @@ def test_background_photos_recover_a_subject_who_stays_put(tmp_path: Path):
         SilhouettesConfig(background="frames:0-3", background_images=photos)
 
 
+@pytest.mark.slow  # ~15 s; make test keeps the plates in test_kinds.py and the robustness rows
 def test_clean_plates_are_the_background_of_a_subject_who_stays_put(tmp_path: Path):
     """The ball that stays put, with each camera's photo of the empty scene as the background
     model (the default, --plates clean): the median loses the ball's core (the slow test
