@@ -31,7 +31,9 @@ frames exist (the Pose2Sim demo), the temporal median and median absolute deviat
 ``--background-samples`` frames spread evenly over the whole video (``--background median``),
 then again over the frames where each pixel is not foreground (``--background-passes``;
 `BackgroundModel.from_sequence`): right wherever the subject covers a pixel in fewer than half
-of them, so a subject who hardly moves becomes background. `background_sample` and
+of them, so a subject who hardly moves becomes background: a camera whose silhouettes span the
+same pixels in most frames is reported, and where they went marked unknown
+(`held_by_median`). `background_sample` and
 `background_model` are that choice and that model (benchmarks/silhouettes_cdnet.py scores
 the whole step). Each processed frame is then classified
 (`tracking.silhouettes.subtraction`: foreground / background / shadow thresholds,
@@ -92,6 +94,7 @@ from tracking.silhouettes.subtraction import (
     PHOTO_MISALIGNMENT_PX,
     BackgroundModel,
     SilhouetteConfig,
+    component_hulls,
     disc,
     exposure_gain,
     fill_holes,
@@ -494,6 +497,57 @@ _PLATE_MAX_FOREGROUND = 0.5
 is refused: another camera's plate, a camera that moved, or a plate that shows the subject."""
 
 
+HELD_GROUP = 0.03
+"""Silhouette components closer than this fraction of the image's larger side are one
+subject's in `held_by_median` (`component_hulls`)."""
+HELD_SHARE = 0.25
+"""A camera's temporal median is taken to hold the subject when the pixels that its
+silhouettes span in at least half of their frames come to this share of its median silhouette
+or more (`held_by_median`). Measured with the step's silhouettes (components grouped within
+3% / 6% of the larger side): the synthetic walk of benchmarks/silhouettes_kinds.py 3.1-3.4 /
+4.5-4.6 in the two cameras it walks towards and away from, 0.00 in the two it crosses, 0.00 in
+all four when it walks diagonally; the same towards / away from 2 cameras at 320x240
+(tests/tracking/silhouettes/test_kinds.py) 1.7-2.6 / 2.7-3.8; the Pose2Sim demo (a person
+keeping to a mat, no plate) 2.5-2.8 / 3.0-4.2; CDnet highway's traffic 0.10 / 0.19."""
+
+
+def held_by_median(covered: np.ndarray, fractions: Sequence[float]) -> np.ndarray | None:
+    """(H, W) bool: the pixels of a camera whose temporal median background cannot be trusted,
+    or None. The median shows the subject wherever it stood in most of the frames (walking
+    towards or away from the camera, keeping to one spot), and the silhouettes miss it there.
+    Found from the silhouettes themselves (``covered``, `_FramesResult.covered`: per pixel, the
+    frames whose silhouette, the convex hulls of its components grouped within
+    `HELD_GROUP`, spans it): the pixels spanned in at least half of the frames with a silhouette
+    (the median's breaking point) must come to `HELD_SHARE` of the median silhouette's area
+    (``fractions``: per frame, the silhouette's fraction of the image). Those pixels
+    underestimate the harm, since the silhouettes they come from miss the subject (in the
+    synthetic walk towards a camera at 320x240, 22-31% of what the silhouettes miss lies in
+    them): what is returned is everywhere the silhouettes went, grown by 1% of the image's
+    larger side (96-100% of it)."""
+    shown = [f for f in fractions if f > 0]
+    if not shown:
+        return None
+    h, w = covered.shape
+    held_px = np.count_nonzero(covered >= 0.5 * len(shown))
+    if held_px < HELD_SHARE * float(np.median(shown)) * h * w:
+        return None
+    margin = max(3, round(0.01 * max(h, w)))
+    return cv2.dilate((covered > 0).astype(np.uint8), np.ones((margin, margin), np.uint8)) > 0
+
+
+def _with_held(result: _CameraResult) -> _CameraResult:
+    """``result`` with the pixels where its median holds the subject (`held_by_median`)
+    added to its unknown background."""
+    covered = result.masks.covered
+    held = None if covered is None else held_by_median(covered, result.masks.fractions)
+    if held is None:
+        return result
+    known = result.background.unknown
+    background = dataclasses.replace(result.background,
+                                     unknown=held if known is None else known | held)
+    return dataclasses.replace(result, background=background, held=float(held.mean()))
+
+
 def _spread(count: int, samples: int, *, odd: bool) -> list[int]:
     """Up to ``samples`` frame indexes spread evenly over 0..count-1; with ``odd`` an odd
     number of them (``samples`` rounded up, ``count`` down), as the median needs."""
@@ -605,6 +659,7 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
             progress.update(len(frames) * len(cameras))
         else:  # one camera after the other in this process
             done = [camera_silhouettes(job, progress) for job in jobs]
+        done = [_with_held(result) for result in done]
         if check:
             progress.set_postfix_str("multi-view check")
             done = _checked_by_hull(map_cameras, _HullJob(
@@ -622,6 +677,16 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
                 "foreground_fraction": {"min": min(fractions), "median":
                                         float(np.median(fractions)), "max": max(fractions)},
                 "empty_frames": empty, "border_frames": border}
+            if result.held:
+                per_camera[camera.name]["median_holds_subject"] = result.held
+                warnings.append(
+                    f"{camera.name}: the subject stood on the same pixels in most frames "
+                    "(walking towards or away from the camera, or keeping to one spot), so the "
+                    "temporal median shows it and the silhouettes miss it; where it went "
+                    f"({result.held:.1%} of the image) is marked unknown ({UNKNOWN_NAME}: the "
+                    "multi-view check and the tracker leave it out); give plates of the "
+                    "empty scene (--background-images or --background-video) or its frames "
+                    "(--background frames:A-B)")
             if result.removed is not None:
                 per_camera[camera.name]["hull_removed"] = {
                     "median": float(np.median(result.removed)), "max": max(result.removed)}
@@ -762,12 +827,17 @@ class _CameraJob:
         of the background models given with it."""
         return _FramesJob(root=self.root, camera=self.camera, frames=frames,
                           thresholds=self.thresholds, out=self.out, model=model,
-                          exposure=self.uses_plates)
+                          exposure=self.uses_plates, coverage=self.uses_median)
 
     @property
     def uses_plates(self) -> bool:
         """Whether this camera's background is its clean plates."""
         return bool(self.plates) and self.config.plates_are_model
+
+    @property
+    def uses_median(self) -> bool:
+        """Whether this camera's background is the temporal median of its video alone."""
+        return not self.plates and self.config.background_frames is None
 
     @property
     def thresholds(self) -> SilhouetteConfig:
@@ -793,6 +863,8 @@ class _FramesJob:
     """Which of the background models given with the job is this camera's."""
     exposure: bool = False
     """Match each frame's exposure to the background (a plate) before classifying it."""
+    coverage: bool = False
+    """Count, per pixel, the frames whose silhouette spans it (`_FramesResult.covered`)."""
 
 
 @dataclass(frozen=True)
@@ -828,12 +900,17 @@ class _FramesResult:
     border: list[int]
     gains: list[float] = field(default_factory=list)
     """Per frame, the exposure gain matched to the plate (channel mean; empty: none)."""
+    covered: np.ndarray | None = None
+    """(H, W) int32: per pixel, the frames whose silhouette spans it (`component_hulls`);
+    None when not counted (`_FramesJob.coverage`)."""
 
     @classmethod
     def joined(cls, parts: Sequence[_FramesResult]) -> _FramesResult:
         """The results of consecutive runs of frames as one."""
+        covered = [p.covered for p in parts if p.covered is not None]
         return cls([f for p in parts for f in p.fractions], [i for p in parts for i in p.empty],
-                   [i for p in parts for i in p.border], [g for p in parts for g in p.gains])
+                   [i for p in parts for i in p.border], [g for p in parts for g in p.gains],
+                   np.sum(covered, axis=0) if covered else None)
 
 
 @dataclass(frozen=True)
@@ -843,6 +920,9 @@ class _CameraResult:
     """Statistics of the final masks."""
     removed: list[float] | None = None
     """Per frame, the fraction of the silhouette the multi-view check removed (None: no check)."""
+    held: float = 0.0
+    """Fraction of the image whose median background is unknown because the subject stood
+    there in most frames (:func:`held_by_median`); 0 when not looked for or under the bar."""
 
 
 def _stats(index: int, mask: np.ndarray, box: tuple[int, int, int, int], into: _FramesResult
@@ -931,11 +1011,15 @@ def frame_silhouettes(job: _FramesJob, models: Sequence[BackgroundModel], progre
     ws = Workspace(job.root)
     model = models[job.model]
     box = content_box(ws, job.camera)
-    result = _FramesResult([], [], [])
+    result = _FramesResult([], [], [], covered=np.zeros(model.shape[:2], np.int32)
+                           if job.coverage else None)  # fmt: skip
+    group_px = _odd(HELD_GROUP * max(model.shape[:2]))
     for index, frame in read_frames(ws, job.camera.name, job.frames):
         mask, gain = _silhouette(frame, model, job.thresholds, exposure=job.exposure)
         if gain is not None:
             result.gains.append(gain)
+        if result.covered is not None:
+            np.add(result.covered, component_hulls(mask, group_px), out=result.covered)
         _write_mask(job.out / f"{index:06d}.png", mask)
         _stats(index, mask, box, result)
         if progress is not None:
@@ -1049,6 +1133,9 @@ def summary_lines(ws: Workspace, record: StepRecord) -> list[str]:
         if "exposure_gain" in cam:
             gain = cam["exposure_gain"]
             line += f", exposure x{gain['min']:.2f}-{gain['max']:.2f} of it"
+        if "median_holds_subject" in cam:
+            line += (f"; the median holds the subject: {cam['median_holds_subject']:.1%} of "
+                     "the image unknown")
         photo = cam.get("background_image")
         if photo is not None and photo["gain"] is not None:
             line += (f"; photo on {photo['area']:.1%} of the image, background unknown on "

@@ -522,6 +522,21 @@ def fill_holes(mask: np.ndarray, max_area: int) -> np.ndarray:
     return np.where(fill[comp], 1, mask).astype(np.uint8)
 
 
+def component_hulls(mask: np.ndarray, group_px: int = 0) -> np.ndarray:
+    """(H, W) uint8, 1 inside the convex hull of each group of components of ``mask``, the
+    components closer than about ``group_px`` pixels grouped (the fragments of one subject's
+    silhouette: limbs that the background swallowed between): the region a silhouette
+    spans, the gaps between its limbs and the holes of a camouflaged part included."""
+    mask = np.asarray(mask, np.uint8)
+    grow = disc(group_px) if group_px > 1 else None
+    grouped = mask if grow is None else cv2.dilate(mask, grow)
+    contours, _ = cv2.findContours(grouped, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    hulls = np.zeros(mask.shape, np.uint8)
+    for contour in contours:
+        cv2.fillPoly(hulls, [cv2.convexHull(contour)], 1)
+    return hulls if grow is None else cv2.erode(hulls, grow)
+
+
 def _drop_small(mask: np.ndarray, min_area: int) -> np.ndarray:
     n, comp, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     keep = stats[:, cv2.CC_STAT_AREA] >= min_area

@@ -658,10 +658,14 @@ class SilhouetteTracker:
         # Foreground in every pixel: the background model failed, and the silhouette has no
         # outline to fit (its distance field is infinite).
         full = [c.name for c, m in zip(self.cameras, masks, strict=True) if m.all()]
-        if empty or full:
+        all_unknown = area == 0 and len(empty) < len(masks)
+        if empty or full or all_unknown:
             self.history = []
+            unknown = ("every silhouette pixel is unknown (its background is: see the "
+                       "warnings of mocap silhouettes)")
             why = "; ".join([*([f"empty silhouette in {', '.join(empty)}"] if empty else []),
-                             *([f"every pixel foreground in {', '.join(full)}"] if full else [])])
+                             *([f"every pixel foreground in {', '.join(full)}"] if full else []),
+                             *([unknown] if all_unknown else [])])
             return FrameResult(frame, None, float("nan"), area, 0, time.perf_counter() - start,
                                f"lost: {why}")  # fmt: skip
         event = ""

@@ -32,6 +32,7 @@ from tracking.silhouettes.step import (
     background_plates,
     background_sample,
     frame_chunks,
+    held_by_median,
     make_silhouettes,
     summary_lines,
 )
@@ -361,3 +362,20 @@ def test_silhouettes_of_the_pose2sim_demo_are_one_person(tmp_path: Path):
             assert np.linalg.norm(cam.project(point[None])[0][0] - uv) < 200, (index, cam.name)
     assert {p.name: hashlib.sha256(p.read_bytes()).hexdigest()
             for p in (demo / "videos").iterdir()} == before
+
+
+def test_a_median_that_holds_the_subject_is_found_from_the_coverage() -> None:
+    """Silhouettes on the same pixels in most frames (the median shows the subject there) are
+    reported, with everywhere they went as unknown; a subject crossing the image is not."""
+    h, w, n = 120, 160, 10
+    staying, crossing = np.zeros((h, w), np.int32), np.zeros((h, w), np.int32)
+    for k in range(n):
+        staying[40:90, 70 - k:80 + k] += 1  # grows on the spot, as when walking nearer
+        crossing[40:90, 10 + 14 * k:20 + 14 * k] += 1
+    fractions = [0.03] * n
+    held = held_by_median(staying, fractions)
+    assert held is not None
+    assert held[40:90, 61:89].all()  # where it went, the first frames' pixels too
+    assert not held[:20].any() and not held[:, :50].any()
+    assert held_by_median(crossing, fractions) is None
+    assert held_by_median(np.zeros((h, w), np.int32), [0.0] * n) is None

@@ -18,6 +18,7 @@ from tracking.silhouettes.subtraction import (
     SilhouetteConfig,
     _free_median,
     classify,
+    component_hulls,
     confusion_counts,
     f_measure,
     foreground_mask,
@@ -295,3 +296,19 @@ def test_bad_input_raises_one_line_value_errors() -> None:
         with pytest.raises(ValueError, match=message) as info:
             call()
         assert "\n" not in str(info.value)
+
+
+def test_component_hulls_span_the_gaps_of_a_group_and_keep_groups_apart() -> None:
+    """An arm beside a trunk, 6 px apart, spans the gap between them once grouped; a second
+    figure 60 px away keeps its own hull, and the empty space between the two stays empty."""
+    mask = np.zeros((H, W), np.uint8)
+    mask[20:100, 20:40] = 1  # trunk
+    mask[20:70, 46:52] = 1  # arm
+    mask[20:100, 110:130] = 1  # another figure
+    alone = component_hulls(mask)
+    assert alone[50, 43] == 0  # ungrouped, the gap stays open
+    grouped = component_hulls(mask, group_px=9)
+    assert grouped[50, 43] == 1 and grouped[30, 50] == 1
+    assert not grouped[:, 60:105].any()
+    assert grouped[50, 120] == 1
+    assert np.all(grouped >= mask)

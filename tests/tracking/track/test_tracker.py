@@ -138,6 +138,16 @@ def test_an_empty_or_full_silhouette_loses_the_frame_without_nan(view, fill, eve
     assert result.pose is None and event in result.event
 
 
+def test_silhouettes_that_are_all_unknown_lose_the_frame():
+    """Every silhouette pixel lies where the background is unknown (a median that holds the
+    subject in every camera): nothing to fit, and the frame is lost, not divided by zero."""
+    masks = _masks(_walk(1)[0])
+    tracker = SilhouetteTracker(CAMERAS, TrackConfig(), shape=SHAPE,
+                                unknown=[m.copy() for m in masks])
+    result = tracker.track(7, masks)
+    assert result.pose is None and "every silhouette pixel is unknown" in result.event
+
+
 # The rig as Qualisys and Pose2Sim calibrate it: a Z-up world. The tracker works in the rig's
 # upright frame (Y up) and writes the joints back in the world frame.
 WORLD_FROM_YUP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
