@@ -1,6 +1,6 @@
 """Protocols of every plugin kind, and the plain data they exchange with the pipeline.
 
-A plugin of the pipeline's kinds (intrinsics, dense, mesh, renderer) is a class with:
+A plugin of the pipeline's kinds (intrinsics, dense, mesh, renderer, body) is a class with:
 
 - ``Options``: a keyword-only dataclass of its settings (each field documented with
   ``metadata={"help": ...}``), filled from ``-O key=value`` on the command line;
@@ -151,6 +151,35 @@ class SilhouetteRenderer(Protocol):
         ``tracking.rig.cameras.Camera`` (typed Any: plugins never depend on the tracking
         package) ->
         (camera.height, camera.width) bool mask, True where the pixel centre sees the mesh."""
+        ...
+
+
+@dataclass(frozen=True, kw_only=True)
+class PosedBody:
+    """A body model's surface and joints in one pose (world frame, metres, Y up)."""
+
+    vertices: Any
+    """(V, 3) float: a closed triangle mesh's vertices."""
+    faces: Any
+    """(F, 3) int: its triangles, outward-facing."""
+    joints: Any
+    """(16, 3) float: the joint centres, in the order of ``tracking.body.model.NODE_NAMES``
+    (pelvis, spine, neck, shoulders, elbows, hips, knees, head_top, wrists, ankles)."""
+
+
+@runtime_checkable
+class BodyModelPlugin(Protocol):
+    """A human body model that a pose of the thesis' layout drives (``tracking.body.model``:
+    root translation and rotation, spine and neck flexion, shoulders and hips as ball joints,
+    elbows and knees as hinges; the rest pose upright, arms hanging, facing +Z)."""
+
+    Options: ClassVar[type]
+    description: ClassVar[str]
+
+    def posed(self, pose: Any, skeleton: Any) -> PosedBody:
+        """``pose`` a ``tracking.body.model.Pose``; ``skeleton`` the
+        ``tracking.body.model.BodyShape`` the pose was retargeted to (a model of its own shape
+        uses it only to stand the subject on the same floor) -> the posed body."""
         ...
 
 

@@ -19,6 +19,7 @@ from typing import Any
 from plugins.options import OptionsError, describe_options, parse_options
 from plugins.protocols import (
     BatchStep,
+    BodyModelPlugin,
     Command,
     DenseBackend,
     IntrinsicInitialiser,
@@ -95,6 +96,15 @@ KINDS: dict[str, PluginKind] = {
         summary="silhouette renderers: posed body mesh + camera → boolean mask",
         choose_flag="--renderer",
         option_flag="--renderer-option",
+    ),
+    "body": PluginKind(
+        name="body",
+        group="mocap.body",
+        protocol=BodyModelPlugin,
+        methods=("posed",),
+        summary="body models: a pose of the thesis' layout → posed surface mesh and joints",
+        choose_flag="--body",
+        option_flag="--body-option",
     ),
     "command": PluginKind(
         name="command",

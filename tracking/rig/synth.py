@@ -69,7 +69,7 @@ from recon.workspace import (
     write_json_atomic,
 )
 from tracking.body.bvh import CMU_METRES_PER_UNIT, Motion, read_bvh
-from tracking.body.model import BONES, NODE_NAMES, BodyModel, BodyShape, Pose, forward_kinematics
+from tracking.body.model import BONES, NODE_NAMES, BodyShape, Pose
 from tracking.rig.cameras import ring_cameras
 from tracking.rig.synth_video import RENDER_DIR, VIDEO_SUFFIX, SyntheticVideos
 from tracking.track.render import DEFAULT_RENDERER
@@ -109,6 +109,13 @@ class SynthConfig:
                                "flags": ("--camera-height",)})
     fov_deg: float = field(default=50.0, metadata={"help": "horizontal field of view in degrees",
                                                    "flags": ("--fov",)})
+    body: str = field(
+        default="superquadric",
+        metadata={"help": "body model plugin that the pose drives (see `mocap plugins`): its "
+                  "surface is rendered and its joints are the truth"})
+    body_options: tuple[str, ...] = field(
+        default=(), metadata={"help": "an option of the body model as KEY=VALUE (repeatable)",
+                              "flags": ("--body-option",), "metavar": "KEY=VALUE"})
     renderer: str = field(default=DEFAULT_RENDERER,
                           metadata={"help": "silhouette renderer plugin (see `mocap plugins`)"})
     renderer_options: tuple[str, ...] = field(
@@ -439,6 +446,7 @@ def _config_record(config: SynthConfig) -> dict[str, Any]:
     record = dataclasses.asdict(config)
     record["bvh"] = str(config.bvh.resolve())
     record["renderer_options"] = list(config.renderer_options)
+    record["body_options"] = list(config.body_options)
     return record
 
 
@@ -487,12 +495,14 @@ def synthesize(ws_root: Path | str, config: SynthConfig, *,
                                            fps=config.fps, frames=config.frames)
     frame_rate = motion.fps / step
     renderer = create("renderer", config.renderer, config.renderer_options)
+    body = create("body", config.body, config.body_options)
     with Timer() as total:
         with Timer() as t_poses:
             poses, shape, residual_m, method = sequence_poses(motion, clip_frames, config)
-        model = BodyModel(shape)
-        vertices = np.stack([model.posed_vertices(p) for p in poses])  # (T, V, 3)
-        joints = np.stack([forward_kinematics(p, shape)[:, :3, 3] for p in poses])  # (T, 16, 3)
+        posed = [body.posed(p, shape) for p in poses]
+        faces = posed[0].faces
+        vertices = np.stack([b.vertices for b in posed])  # (T, V, 3)
+        joints = np.stack([b.joints for b in posed])  # (T, 16, 3)
         floor_y = float(vertices[..., 1].min())
         pelvis = joints[:, NODE_NAMES.index("pelvis")]
         cameras, radius_m, margin_px = place_cameras(vertices, pelvis, floor_y, shape.height,
@@ -526,7 +536,7 @@ def synthesize(ws_root: Path | str, config: SynthConfig, *,
                 shadow = (shadow_polygon_in_world(feet[k], floor_y, config) if with_shadow
                           else None)
                 for v, camera in enumerate(cameras):
-                    mask = np.asarray(renderer.render(vertices[k], model.faces, camera), bool)
+                    mask = np.asarray(renderer.render(vertices[k], faces, camera), bool)
                     if videos is not None:
                         videos.add(v, mask)
                     if not config.clean:
@@ -583,6 +593,7 @@ def _write_truth(gt_dir: Path, poses: list[Pose], shape: BodyShape, joints: np.n
     write_json_atomic(gt_dir / "pose.json", {
         "frame_rate": frame_rate,
         "shape": dataclasses.asdict(shape),
+        "body": {"model": config.body, "options": list(config.body_options)},
         "source": {"bvh": str(config.bvh.resolve()), "clip_frames": [int(f) for f in clip_frames]},
         "frames": [{"frame": k, "clip_frame": int(f), "params": [float(v) for v in p.params]}
                    for k, (f, p) in enumerate(zip(clip_frames, poses, strict=True))],

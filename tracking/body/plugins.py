@@ -1,0 +1,39 @@
+"""The body models shipped with mocap, as ``mocap.body`` plugins (`plugins.protocols`).
+
+* ``superquadric``: the thesis' generic model (`tracking.body.model`): 29 rigid superquadric
+  segments on the skeleton the pose was retargeted to, so its shape is the driving clip's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from plugins.protocols import Plugin, PosedBody
+from tracking.body.model import BodyModel, BodyShape, Pose, forward_kinematics
+
+
+class SuperquadricBody(Plugin):
+    """The thesis' model: rigid superquadric segments on the given skeleton."""
+
+    @dataclass(frozen=True, kw_only=True)
+    class Options:
+        pass
+
+    description: ClassVar[str] = ("the thesis' generic model: 29 rigid superquadric segments "
+                                  "on the clip's own skeleton")
+
+    def __init__(self, options: Options) -> None:
+        super().__init__(options)
+        self._model: BodyModel | None = None
+
+    def model(self, skeleton: BodyShape) -> BodyModel:
+        """The meshed body of ``skeleton`` (the last one is kept)."""
+        if self._model is None or self._model.shape != skeleton:
+            self._model = BodyModel(skeleton)
+        return self._model
+
+    def posed(self, pose: Pose, skeleton: BodyShape) -> PosedBody:
+        model = self.model(skeleton)
+        return PosedBody(vertices=model.posed_vertices(pose), faces=model.faces,
+                         joints=forward_kinematics(pose, skeleton)[:, :3, 3])
