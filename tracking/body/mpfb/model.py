@@ -54,9 +54,9 @@ neck          Neck.head (joint-neck)            the base of the neck (C7); it li
                                                 `tracking.body.model`
 head_top      the crown vertex, on Head         the top of the head mesh: the base mesh's
                                                 highest vertex (`MpfbAssets.head_top_vertex`,
-                                                skinned to Head alone), within 0.5 mm of the
-                                                top of every shape; Head.tail (joint-head-2)
-                                                lies 3-6 mm above the skin
+                                                skinned to Head alone), at most 0.4 mm below
+                                                the top over 60 random shapes; Head.tail
+                                                (joint-head-2) lies 3-6 mm above the skin
 l/r_shoulder  Left/RightArm.head                glenohumeral centre (Left/RightShoulder are the
                                                 clavicles, from the sternum)
 l/r_elbow     Left/RightForeArm.head            elbow centre
