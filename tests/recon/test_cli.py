@@ -261,7 +261,8 @@ def test_listing_commands_and_plugins_imports_no_pipeline(args, tmp_path):
     else:
         plugin_modules = {"tracking", "tracking.commands", "tracking.batch_steps",
                           "tracking.track", "tracking.track.render", "tracking.rig",
-                          "tracking.rig.cameras"}
+                          "tracking.rig.cameras", "tracking.body", "tracking.body.plugins",
+                          "tracking.body.mpfb", "tracking.body.mpfb.plugin"}
         assert tracking <= plugin_modules, sorted(tracking - plugin_modules)
         assert "tracking.track.render" in tracking  # the renderers were described
 

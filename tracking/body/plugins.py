@@ -7,10 +7,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from plugins.protocols import Plugin, PosedBody
-from tracking.body.model import BodyModel, BodyShape, Pose, forward_kinematics
+
+if TYPE_CHECKING:  # `mocap plugins` lists this module: the model is imported when used
+    from tracking.body.model import BodyModel, BodyShape, Pose
 
 
 class SuperquadricBody(Plugin):
@@ -25,15 +27,19 @@ class SuperquadricBody(Plugin):
 
     def __init__(self, options: Options) -> None:
         super().__init__(options)
-        self._model: BodyModel | None = None
+        self._model: Any = None
 
     def model(self, skeleton: BodyShape) -> BodyModel:
         """The meshed body of ``skeleton`` (the last one is kept)."""
+        from tracking.body.model import BodyModel
+
         if self._model is None or self._model.shape != skeleton:
             self._model = BodyModel(skeleton)
         return self._model
 
     def posed(self, pose: Pose, skeleton: BodyShape) -> PosedBody:
+        from tracking.body.model import forward_kinematics
+
         model = self.model(skeleton)
         return PosedBody(vertices=model.posed_vertices(pose), faces=model.faces,
                          joints=forward_kinematics(pose, skeleton)[:, :3, 3])

@@ -11,13 +11,15 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from plugins.protocols import Plugin, PosedBody
 from plugins.registry import PluginError
-from tracking.body.model import NODE_INDEX, BodyShape, Pose
+
+if TYPE_CHECKING:  # `mocap plugins` lists this module: the model is imported when used
+    from tracking.body.model import BodyShape, Pose
 
 CLOTHED_BONES: tuple[str, ...] = (
     "Hips", "LHipJoint", "RHipJoint", "LowerBack", "Spine", "Spine1",
@@ -70,6 +72,7 @@ class MpfbBody(Plugin):
                                   "proportions")
 
     def __init__(self, options: Options) -> None:
+        from tracking.body.model import NODE_INDEX, BodyShape, Pose
         from tracking.body.mpfb.model import (
             MacroShape,
             load_assets,
