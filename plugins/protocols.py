@@ -182,6 +182,17 @@ class BodyModelPlugin(Protocol):
         uses it only to stand the subject on the same floor) -> the posed body."""
         ...
 
+    def tracking_model(self, height_m: float) -> Any:
+        """The model the silhouette tracker starts from for a subject of this stature: an
+        object with the interface of ``tracking.body.model.TrackedModel``."""
+        ...
+
+    def model_from_record(self, record: Mapping[str, Any], skeleton: Any) -> Any:
+        """The tracking model that a pose file describes: ``record`` its ``body`` entry (the
+        model's ``record()``), ``skeleton`` its ``shape`` (a ``BodyShape``). ValueError when
+        the record does not describe one of this plugin's models."""
+        ...
+
 
 @runtime_checkable
 class Command(Protocol):

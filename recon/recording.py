@@ -508,14 +508,23 @@ def log_xor_overlay(
     _log_segmentation_frame(rec, entity, ids, frame, time_s)
 
 
+BODY_COLOUR_RGBA: tuple[int, int, int, int] = (222, 184, 150, 255)
+"""The albedo of a tracked or synthetic body mesh in a recording (a skin tone)."""
+
+
 def log_mesh_frame(
     rec: rr.RecordingStream, entity: str, vertices: np.ndarray, faces: np.ndarray, frame: int,
-    time_s: float,
+    time_s: float, normals: np.ndarray | None = None,
+    colour_rgba: tuple[int, int, int, int] = BODY_COLOUR_RGBA,
 ) -> None:  # fmt: skip
-    """A mesh that moves: its vertices on the ``frame`` and ``time`` timelines."""
+    """A mesh that moves: its vertices (and unit ``normals``, shaded smooth by the viewer when
+    given) on the ``frame`` and ``time`` timelines, in one ``colour_rgba``."""
     with _at_frame(rec, frame, time_s):
-        rec.log(entity, rr.Mesh3D(vertex_positions=np.asarray(vertices, dtype=np.float32),
-                                  triangle_indices=np.asarray(faces, dtype=np.uint32)))
+        rec.log(entity, rr.Mesh3D(
+            vertex_positions=np.asarray(vertices, dtype=np.float32),
+            triangle_indices=np.asarray(faces, dtype=np.uint32),
+            vertex_normals=None if normals is None else np.asarray(normals, dtype=np.float32),
+            albedo_factor=colour_rgba))
 
 
 def log_skeleton_frame(

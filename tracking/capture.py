@@ -216,7 +216,8 @@ def _track_outcome(ws: Workspace, s: dict[str, Any]) -> StepOutcome:
     return StepOutcome(
         "track", f"{s['tracked']}/{s['frames']} frames tracked, median XOR "
         f"{s['median_xor_fraction']:.1%} of the silhouette, subject height {s['height_m']:.2f} m",
-        f"{ws.tracks_dir}/joints.csv, pose.json, motion.bvh", bool(s.get("up_to_date")),
+        f"{ws.tracks_dir}/joints.csv, pose.json, motion.bvh, subject.glb",
+        bool(s.get("up_to_date")),
         s["seconds_per_frame"] * s["frames"], notes)
 
 

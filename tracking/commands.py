@@ -72,9 +72,12 @@ class TrackCommand:
                    "on an image pyramid), optimised root first, then spine and neck, then each "
                    "limb (grid search + downhill simplex). The first frame is initialised "
                    "automatically from the visual hull (or --init-pose). Writes "
-                   "WS/tracks/joints.csv (world frame), pose.json and motion.bvh (in the camera "
-                   "rig's upright frame, Y up; pose.json holds its world_from_upright rotation) "
-                   "and WS/logs/track.rrd.")
+                   "WS/tracks/joints.csv (world frame), pose.json, motion.bvh and subject.glb "
+                   "(the skinned subject, for Blender or three.js; in the camera rig's upright "
+                   "frame, Y up; pose.json holds its world_from_upright rotation) and "
+                   "WS/logs/track.rrd. --body chooses the body model: superquadric (the "
+                   "thesis' rigid segments) or mpfb (MakeHuman's skinned body, its macro shape "
+                   "and clothing refined from the first frames' silhouettes).")
 
     def add_arguments(self, parser: argparse.ArgumentParser) -> None:
         from tracking.track.step import TrackStepConfig
@@ -107,7 +110,7 @@ class TrackCommand:
                   "pose for them and motion.bvh repeats the last tracked one", file=sys.stderr)
         for frame, event in summary.get("events", {}).items():
             print(f"frame {frame:>5}: {event}")
-        print(f"outputs    {ws.tracks_dir}/joints.csv, pose.json, motion.bvh; "
+        print(f"outputs    {ws.tracks_dir}/joints.csv, pose.json, motion.bvh, subject.glb; "
               f"{ws.logs_dir}/track.rrd")
 
 

@@ -35,6 +35,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from functools import cached_property
+from typing import ClassVar, Protocol
 
 import numpy as np
 
@@ -623,6 +624,34 @@ def segment_specs(shape: BodyShape) -> tuple[SegmentSpec, ...]:
 
 
 @dataclass(frozen=True)
+class ShapeParameters:
+    """A body model's shape parameters as the tracker refines them: names, current values,
+    bounds (arrays of one length) and the finite-difference step of their derivatives."""
+
+    names: tuple[str, ...]
+    values: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    step: float
+
+
+@dataclass(frozen=True)
+class SkinnedMesh:
+    """A body model's output mesh with its skeleton, in the bind pose every joint frame of
+    which is parallel to the world (`tracking.body.gltf.write_skinned_glb`'s conventions):
+    vertices (V, 3) and normals (V, 3), faces (F, 3), joint names, parents (-1 for the root;
+    parents first), heads (B, 3) and skinning weights (V, B)."""
+
+    vertices_m: np.ndarray
+    normals: np.ndarray
+    faces: np.ndarray
+    joint_names: tuple[str, ...]
+    joint_parents: tuple[int, ...]
+    joint_heads_m: np.ndarray
+    weights: np.ndarray
+
+
+@dataclass(frozen=True)
 class BodyModel:
     """The meshed body of one subject. Vertices are rigidly skinned: each follows its segment's
     node. Arrays (read-only): vertex_in_node (V, 3); rest_vertices (V, 3) world positions in the
@@ -683,6 +712,62 @@ class BodyModel:
     def segment_names(self) -> tuple[str, ...]:
         return tuple(s.name for s in self.segments)
 
+    # -- what the tracker asks of a body model (`tracking.track.tracker.TrackedModel`) -------
+
+    name: ClassVar[str] = "superquadric"
+    """The ``mocap.body`` plugin whose model this is."""
+
+    @cached_property
+    def node_weights(self) -> np.ndarray:
+        """(V, 16) each vertex's skinning weight per node of `NODE_NAMES`: rigid, so one 1
+        per row (its segment's node)."""
+        weights = np.zeros((len(self.vertex_in_node), len(NODE_NAMES)))
+        weights[np.arange(len(weights)), self.node_of_segment[self.segment_of_vertex]] = 1.0
+        weights.flags.writeable = False
+        return weights
+
+    def faces_moved_by(self, moved_nodes: np.ndarray) -> np.ndarray:
+        """(F,) bool: the faces that move when the nodes ``moved_nodes`` ((16,) bool) do."""
+        return np.asarray(moved_nodes)[self.node_of_segment[self.segment_of_face]]
+
+    def posed_surface(self, pose: Pose) -> tuple[np.ndarray, np.ndarray]:
+        """(V, 3) world vertices and (V, 3) their unit outward normals in `pose`."""
+        world = forward_kinematics(pose, self.shape)[self.node_of_segment[self.segment_of_vertex]]
+        rot = world[:, :3, :3]
+        return (np.einsum("vij,vj->vi", rot, self.vertex_in_node) + world[:, :3, 3],
+                np.einsum("vij,vj->vi", rot, self.vertex_normals_in_node))
+
+    def joints(self, pose: Pose) -> np.ndarray:
+        """(16, 3) world positions of the nodes of `NODE_NAMES` in `pose`."""
+        return forward_kinematics(pose, self.shape)[:, :3, 3].copy()
+
+    def shape_parameters(self) -> ShapeParameters:
+        """The shape the silhouettes refine: one scale per group of `SHAPE_GROUPS`."""
+        n = len(SHAPE_GROUPS)
+        return ShapeParameters(names=tuple("+".join(g) for g in SHAPE_GROUPS),
+                               values=np.ones(n), lower=np.full(n, 0.6),
+                               upper=np.full(n, 1.5), step=1e-3)
+
+    def reshaped(self, values: np.ndarray) -> BodyModel:
+        """This model with the shape parameters `values` (`shape_parameters`)."""
+        return BodyModel(scaled_shape(self.shape, values))
+
+    def record(self) -> dict[str, object]:
+        """What a pose file stores to rebuild this model: the shape is the skeleton itself."""
+        return {"name": self.name}
+
+    def skin(self) -> SkinnedMesh:
+        """The mesh at rest (`Pose.neutral`), rigidly bound to the nodes of `NODE_NAMES`."""
+        heads = forward_kinematics(Pose.neutral(), self.shape)[:, :3, 3]
+        return SkinnedMesh(self.rest_vertices, self.vertex_normals_in_node, self.faces,
+                           NODE_NAMES, NODE_PARENTS, heads, self.node_weights)
+
+    def skin_pose(self, pose: Pose) -> tuple[np.ndarray, np.ndarray]:
+        """(16, 3, 3) each node's parent_from_node rotation (the root's world_from_pelvis) and
+        (3,) the root's displacement from rest: `skin`'s animation in ``pose``."""
+        local = parent_from_node_transforms(pose, self.shape)
+        return local[:, :3, :3], local[0, :3, 3].copy()
+
     def posed_vertices(self, pose: Pose) -> np.ndarray:
         """(V, 3) world vertex positions in `pose`."""
         world_from_node = forward_kinematics(pose, self.shape)
@@ -691,3 +776,55 @@ class BodyModel:
             np.einsum("vij,vj->vi", world_from_vertex_node[:, :3, :3], self.vertex_in_node)
             + world_from_vertex_node[:, :3, 3]
         )
+
+
+class TrackedModel(Protocol):
+    """What the tracker asks of a body model (a ``mocap.body`` plugin's ``tracking_model``):
+    `BodyModel` (the thesis' rigid superquadrics) and
+    `tracking.body.mpfb.subject.MpfbModel` (MakeHuman's skinned body) are the two."""
+
+    name: ClassVar[str]
+    """The ``mocap.body`` plugin of the model."""
+    shape: BodyShape
+    """The subject's skeleton: our forward kinematics of it places the joints of the pose
+    layout (limb clearances, outline derivatives, the BVH)."""
+    faces: np.ndarray
+    """(F, 3) int: the closed surface's outward triangles."""
+    node_weights: np.ndarray
+    """(V, 16) each vertex's weight per node of `NODE_NAMES`."""
+
+    def posed_vertices(self, pose: Pose) -> np.ndarray:
+        """(V, 3) world vertices."""
+        ...
+
+    def posed_surface(self, pose: Pose) -> tuple[np.ndarray, np.ndarray]:
+        """(V, 3) world vertices and (V, 3) unit outward normals."""
+        ...
+
+    def faces_moved_by(self, moved_nodes: np.ndarray) -> np.ndarray:
+        """(F,) bool: the triangles that move when the nodes ((16,) bool) do."""
+        ...
+
+    def joints(self, pose: Pose) -> np.ndarray:
+        """(16, 3) the joint centres the tracker reports, `NODE_NAMES` order."""
+        ...
+
+    def shape_parameters(self) -> ShapeParameters:
+        """`ShapeParameters`: what a shape pass refines."""
+        ...
+
+    def reshaped(self, values: np.ndarray) -> TrackedModel:
+        """The model with the shape parameters ``values``."""
+        ...
+
+    def record(self) -> dict[str, object]:
+        """The pose file's ``body`` entry (the plugin's ``model_from_record`` reads it)."""
+        ...
+
+    def skin(self) -> SkinnedMesh:
+        """The output mesh (full resolution) bound to its skeleton, at rest."""
+        ...
+
+    def skin_pose(self, pose: Pose) -> tuple[np.ndarray, np.ndarray]:
+        """(B, 3, 3) local joint rotations and (3,) root displacement of `skin` in ``pose``."""
+        ...

@@ -27,7 +27,7 @@ import itertools
 import json
 from dataclasses import replace
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -194,6 +194,9 @@ class PoseFile(NamedTuple):
     frames: PoseFrames
     world_from_upright: np.ndarray
     """(3, 3) rotation from the frame of the poses (Y up) to the world frame of the cameras."""
+    body: dict[str, Any]
+    """The body model of the poses: ``{"name": <mocap.body plugin>, ...}`` as its model's
+    ``record()`` wrote it (``{"name": "superquadric"}`` for a file without one)."""
 
 
 def read_pose_file(path: Path | str) -> PoseFile:
@@ -204,7 +207,8 @@ def read_pose_file(path: Path | str) -> PoseFile:
          "shape": {<every BodyShape field>: metres, ...},
          "frames": [{"frame": 0, "params": [24 floats in POSE_LAYOUT order]},
                     {"frame": 1, "params": null}, ...],
-         "world_from_upright": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]}
+         "world_from_upright": [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
+         "body": {"name": "superquadric"}}
 
     The poses are in an upright frame (Y up, gravity along -Y); ``world_from_upright``, a
     rotation about the origin, takes them to the world frame of the cameras (default: the
@@ -240,6 +244,9 @@ def read_pose_file(path: Path | str) -> PoseFile:
             raise TypeError("frames is not a list of objects")
         numbers = [e["frame"] for e in entries]
         rotation = np.array(data.get("world_from_upright", np.eye(3)), dtype=float)
+        body = data.get("body", {"name": "superquadric"})
+        if not isinstance(body, dict) or not isinstance(body.get("name"), str):
+            raise TypeError("body is not an object with a name")
     except (KeyError, TypeError, ValueError) as exc:
         raise UserError(f"{path}: not a pose track ({exc!s}); expected shape, frames and (for "
                         "a motion) frame_rate") from None
@@ -279,7 +286,7 @@ def read_pose_file(path: Path | str) -> PoseFile:
         raise UserError(f"{path}: frame {repeated[0]} appears more than once"
                         + (f" (and {len(repeated) - 1} more frames)" if len(repeated) > 1 else "")
                         + "; each frame needs one entry")
-    return PoseFile(frame_rate, shape, frames, rotation)
+    return PoseFile(frame_rate, shape, frames, rotation, body)
 
 
 MAX_FRAME_NUMBER: int = 2**31 - 1

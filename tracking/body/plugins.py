@@ -43,3 +43,16 @@ class SuperquadricBody(Plugin):
         model = self.model(skeleton)
         return PosedBody(vertices=model.posed_vertices(pose), faces=model.faces,
                          joints=forward_kinematics(pose, skeleton)[:, :3, 3])
+
+    def tracking_model(self, height_m: float) -> BodyModel:
+        """The tracker's start: `BodyShape.default`'s proportions of this stature."""
+        from tracking.body.model import BodyModel, BodyShape
+
+        return BodyModel(BodyShape.default(height_m))
+
+    def model_from_record(self, record: dict[str, Any], skeleton: BodyShape) -> BodyModel:
+        """The model of a pose file: its shape is the skeleton itself."""
+        from tracking.body.model import BodyModel
+
+        return BodyModel(skeleton)
+

@@ -243,7 +243,8 @@ def read_pose_track(path: Path, max_frames: int | None = None) -> MotionSequence
     from the list are lost frames too. `read_pose_file` refuses impossible frames and poses;
     a span of more than `MAX_REPORT_FRAMES` frames is refused unless ``max_frames`` cuts it.
     """
-    frame_rate, shape, entries, _ = read_pose_file(path)
+    given = read_pose_file(path)
+    frame_rate, shape, entries = given.frame_rate, given.shape, given.frames
     if frame_rate is None:
         raise UserError(f"{path} holds a pose without a frame rate (such as mocap fit's "
                         "fit.json), not a motion to report")

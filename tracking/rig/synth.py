@@ -593,7 +593,7 @@ def _write_truth(gt_dir: Path, poses: list[Pose], shape: BodyShape, joints: np.n
     write_json_atomic(gt_dir / "pose.json", {
         "frame_rate": frame_rate,
         "shape": dataclasses.asdict(shape),
-        "body": {"model": config.body, "options": list(config.body_options)},
+        "body": {"name": config.body, "options": list(config.body_options)},
         "source": {"bvh": str(config.bvh.resolve()), "clip_frames": [int(f) for f in clip_frames]},
         "frames": [{"frame": k, "clip_frame": int(f), "params": [float(v) for v in p.params]}
                    for k, (f, p) in enumerate(zip(clip_frames, poses, strict=True))],

@@ -35,11 +35,9 @@ from tracking.body.model import (
     PARAM_MOVES_NODE,
     POSE_LAYOUT,
     UPPER_LIMITS,
-    BodyModel,
-    BodyShape,
     Pose,
+    TrackedModel,
     pose_derivative_axes,
-    scaled_shape,
 )
 
 
@@ -131,16 +129,19 @@ def _projection_derivative(camera: Camera, points: np.ndarray) -> np.ndarray:
 
 class _Posed:
     """A model in a pose: world vertices and normals, and the derivatives of the vertices with
-    respect to the pose parameters `free` (and to any `extra` columns, e.g. shape scales)."""
+    respect to the pose parameters `free` (and to any `extra` columns, e.g. shape scales).
 
-    def __init__(self, model: BodyModel, x: np.ndarray, free: np.ndarray,
+    A vertex moved by parameter k with weight w (its skinning weight on the nodes k moves:
+    1 or 0 for the rigid model) changes at w * axis_k x (v - pivot_k): exact for rigid
+    segments, and for a skinned vertex the blend of its bones' motions to first order in the
+    spread of their positions. The pivots are our forward kinematics of `model.shape`.
+    """
+
+    def __init__(self, model: TrackedModel, x: np.ndarray, free: np.ndarray,
                  extra: np.ndarray | None = None) -> None:  # fmt: skip
-        node = model.node_of_segment[model.segment_of_vertex]
-        world, self.axes, self.pivots = pose_derivative_axes(Pose(x), model.shape)
-        rot = world[node, :3, :3]
-        self.verts = np.einsum("vij,vj->vi", rot, model.vertex_in_node) + world[node, :3, 3]
-        self.normals = np.einsum("vij,vj->vi", rot, model.vertex_normals_in_node)
-        self.moves = PARAM_MOVES_NODE[free][:, node]  # (P, V)
+        _, self.axes, self.pivots = pose_derivative_axes(Pose(x), model.shape)
+        self.verts, self.normals = model.posed_surface(Pose(x))
+        self.moves = PARAM_MOVES_NODE[free].astype(float) @ model.node_weights.T  # (P, V)
         self.free = free
         self.extra = extra  # (V, 3, E) or None
 
@@ -156,11 +157,13 @@ class _Posed:
             out[:, :, :e] = self.extra[idx]
         verts = self.verts[idx]
         for col, k in enumerate(self.free):
-            on = self.moves[col, idx]
+            weight = self.moves[col, idx]
+            on = weight > 0
             if _ROTATION[k]:
-                out[on, :, e + col] = np.cross(self.axes[k], verts[on] - self.pivots[k])
+                out[on, :, e + col] = weight[on, None] * np.cross(self.axes[k],
+                                                                  verts[on] - self.pivots[k])
             else:
-                out[on, :, e + col] = self.axes[k]
+                out[on, :, e + col] = weight[on, None] * self.axes[k]
         return out
 
 
@@ -257,7 +260,7 @@ class _FrameOutlines:
         self.targets = [_ViewTarget(c, m, config, k) for c, m, k in
                         zip(self.cameras, masks, known, strict=True)]  # fmt: skip
 
-    def system(self, model: BodyModel, x: np.ndarray, free: np.ndarray, renderer: object,
+    def system(self, model: TrackedModel, x: np.ndarray, free: np.ndarray, renderer: object,
                config: ContourConfig,
                extra: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
         from tracking.track.render import render_views
@@ -271,7 +274,7 @@ class ContourRefiner:
     """Refines poses of `model` against one frame's silhouettes (`masks`, one per camera, the
     cameras of the pyramid level to use; `known`: per view, None or the pixels that count)."""
 
-    def __init__(self, model: BodyModel, cameras: Sequence[Camera], masks: Sequence[np.ndarray],
+    def __init__(self, model: TrackedModel, cameras: Sequence[Camera], masks: Sequence[np.ndarray],
                  renderer: object, config: ContourConfig | None = None,
                  known: Sequence[np.ndarray | None] | None = None) -> None:  # fmt: skip
         self.model, self.renderer = model, renderer
@@ -315,54 +318,60 @@ class ContourRefiner:
         return x, best, evaluations
 
 
-def refine_shape(base: BodyShape, scales: np.ndarray, frames: Sequence[tuple[Sequence[Camera],
+def refine_shape(base: TrackedModel, frames: Sequence[tuple[Sequence[Camera],
                  Sequence[np.ndarray], Sequence[np.ndarray | None]]],
                  poses: Sequence[np.ndarray], renderer: object,
-                 energy: Callable[[BodyModel, Sequence[np.ndarray]], float],
-                 config: ContourConfig | None = None, bounds: tuple[float, float] = (0.6, 1.5),
-                 ) -> tuple[np.ndarray, list[np.ndarray], float]:  # fmt: skip
-    """The shape scales (`tracking.body.model.SHAPE_GROUPS` of `base`) and the poses of several
-    frames together against their outlines; frames: (cameras, masks, known) per frame (known:
-    per view, None or the pixels that count).
+                 energy: Callable[[TrackedModel, Sequence[np.ndarray]], float],
+                 config: ContourConfig | None = None,
+                 ) -> tuple[TrackedModel, list[np.ndarray], float]:  # fmt: skip
+    """The shape parameters of `base` (`TrackedModel.shape_parameters`: the segment scales of
+    `tracking.body.model.SHAPE_GROUPS`, or a skinned body's macro modifiers) and the poses of
+    several frames together against their outlines; frames: (cameras, masks, known) per frame
+    (known: per view, None or the pixels that count).
 
     energy(model, poses): the XOR energy summed over the frames, which every accepted step
-    lowers. Shape derivatives are forward differences of the vertices. Returns the scales,
-    the poses and their energy.
+    lowers. Shape derivatives are forward differences of the vertices (the parameters' own
+    step). Returns the reshaped model, the poses and their energy.
     """
     cfg = config or ContourConfig()
     outlines = [_FrameOutlines(c, m, cfg, k) for c, m, k in frames]
-    scales = np.asarray(scales, float).copy()
+    params = base.shape_parameters()
+    values = np.asarray(params.values, float).copy()
     poses = [np.clip(np.asarray(x, float), LOWER_LIMITS, UPPER_LIMITS) for x in poses]
-    n_shape, n_pose = len(scales), len(LOWER_LIMITS)
+    n_shape, n_pose = len(values), len(LOWER_LIMITS)
     free = np.arange(n_pose)
-    lo = np.concatenate([np.full(n_shape, bounds[0]), np.tile(LOWER_LIMITS, len(poses))])
-    hi = np.concatenate([np.full(n_shape, bounds[1]), np.tile(UPPER_LIMITS, len(poses))])
+    lo = np.concatenate([params.lower, np.tile(LOWER_LIMITS, len(poses))])
+    hi = np.concatenate([params.upper, np.tile(UPPER_LIMITS, len(poses))])
+    h = params.step
 
-    def split(z: np.ndarray) -> tuple[BodyModel, list[np.ndarray]]:
-        """The model of z's shape scales and z's poses."""
-        return (BodyModel(scaled_shape(base, z[:n_shape])),
+    def split(z: np.ndarray) -> tuple[TrackedModel, list[np.ndarray]]:
+        """The model of z's shape parameters and z's poses."""
+        return (base.reshaped(z[:n_shape]),
                 [z[n_shape + k * n_pose:n_shape + (k + 1) * n_pose] for k in range(len(poses))])
 
-    model = BodyModel(scaled_shape(base, scales))
+    model = base.reshaped(values)
     best = energy(model, poses)
-    lam, h = 1e-2, 1e-3
+    lam = 1e-2
     size = n_shape + n_pose * len(poses)
     for _ in range(cfg.iterations):
-        bumped = [BodyModel(scaled_shape(base, scales + h * np.eye(n_shape)[i]))
+        # A forward step past an upper bound goes backwards instead.
+        signs = np.where(values + h <= params.upper, 1.0, -1.0)
+        bumped = [base.reshaped(values + signs[i] * h * np.eye(n_shape)[i])
                   for i in range(n_shape)]  # fmt: skip
         a, b = np.zeros((size, size)), np.zeros(size)
         for k, (frame, x) in enumerate(zip(outlines, poses, strict=True)):
             verts = model.posed_vertices(Pose(x))
-            extra = np.stack([(m.posed_vertices(Pose(x)) - verts) / h for m in bumped], -1)
+            extra = np.stack([(m.posed_vertices(Pose(x)) - verts) / (s * h)
+                              for m, s in zip(bumped, signs, strict=True)], -1)  # fmt: skip
             ak, bk = frame.system(model, x, free, renderer, cfg, extra)
             rows = np.r_[np.arange(n_shape), n_shape + k * n_pose + free]
             a[np.ix_(rows, rows)] += ak
             b[rows] += bk
-        accepted, best, lam, _ = _accepted_step(a, b, np.concatenate([scales, *poses]),
+        accepted, best, lam, _ = _accepted_step(a, b, np.concatenate([values, *poses]),
                                                 (lo, hi), lam, best,
                                                 lambda z: energy(*split(z)))  # fmt: skip
         if accepted is None:
             break
         model, poses = split(accepted)
-        scales = accepted[:n_shape]
-    return scales, poses, best
+        values = accepted[:n_shape]
+    return model, poses, best

@@ -5,11 +5,15 @@ or `mocap silhouettes`) and writes, each atomically:
 
 * ``tracks/joints.csv``: ``frame,joint,x,y,z``, metres, world frame, the joint names of
   `tracking.body.model.NODE_NAMES` (those of ``gt/joints.csv``); lost frames have no rows;
-* ``tracks/pose.json``: ``{"frame_rate", "shape": {BodyShape}, "world_from_upright": (3, 3),
-  "frames": [{"frame", "params" (24, POSE_LAYOUT order) or null when lost, "energy_px",
+* ``tracks/pose.json``: ``{"frame_rate", "shape": {BodyShape}, "body": {"name": the body
+  model plugin, and what rebuilds its subject, e.g. mpfb's "macro"}, "world_from_upright":
+  (3, 3), "frames": [{"frame", "params" (24, POSE_LAYOUT order) or null when lost, "energy_px",
   "xor_fraction", "event"}]}``;
 * ``tracks/motion.bvh``: the tracked frames on the body skeleton (`tracking.body.motion`); a
   BVH has no gaps, so a lost frame repeats the last tracked pose (pose.json says which);
+* ``tracks/subject.glb``: the subject's mesh (the body model's full resolution) skinned on
+  its skeleton with the tracked motion, a glTF 2.0 binary that Blender and three.js play
+  (`tracking.body.gltf`; lost frames held as in the BVH);
 * ``logs/track.rrd``: silhouettes and the XOR overlay per camera, the body mesh and skeleton,
   and the energy per frame, on the ``frame`` and ``time`` timelines.
 
@@ -36,8 +40,7 @@ import numpy as np
 from recon.errors import UserError
 from recon.progress import bar as progress_bar
 from recon.workspace import Timer, Workspace, atomic_output, fingerprint, write_json_atomic
-from tracking.body.model import BONES, NODE_NAMES, BodyModel, BodyShape, Pose, pose_in_frame
-from tracking.body.model import node_positions_in_world as _nodes
+from tracking.body.model import BONES, NODE_NAMES, Pose, TrackedModel, pose_in_frame
 from tracking.body.motion import read_pose_file
 from tracking.silhouettes.step import UNKNOWN_NAME
 from tracking.track.render import render_views
@@ -118,10 +121,10 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
               if f >= step.first and (step.last is None or f <= step.last)]  # fmt: skip
     if not frames:
         raise UserError(f"no silhouette frames between {step.first} and {step.last}")
-    init_shape, init_pose = None, None
+    init_model, init_pose = None, None
     given = read_pose_file(step.init_pose) if step.init_pose is not None else None
     if given is not None:
-        init_shape = given.shape
+        init_model = _model_of_pose_file(step.init_pose, given, config.body)
         init_pose = next((Pose(p) for _, p in given.frames if p is not None), None)
         if init_pose is None:
             raise UserError(f"{step.init_pose}: has no pose")
@@ -130,7 +133,8 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
                 "frames": [frames[0], frames[-1], len(frames)]}  # fmt: skip
     fp = fingerprint("track", settings, upstream)
     outputs = {"joints": ws.tracks_dir / "joints.csv", "pose": ws.tracks_dir / "pose.json",
-               "bvh": ws.tracks_dir / "motion.bvh", "rrd": ws.logs_dir / "track.rrd"}
+               "bvh": ws.tracks_dir / "motion.bvh", "glb": ws.tracks_dir / "subject.glb",
+               "rrd": ws.logs_dir / "track.rrd"}
     if done := ws.reusable("track", fp, *outputs.values(), overwrite=overwrite):
         return {**done.summary, "up_to_date": True}
     frame_rate = frame_rate_of(ws)
@@ -146,12 +150,12 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         assert init_pose is not None  # a file without a pose was refused above
         init_pose = pose_in_frame(init_pose, world_from_upright.T @ given.world_from_upright)
     upright = [c.in_frame(world_from_upright) for c in cameras]
-    tracker = SilhouetteTracker(upright, config, shape=init_shape,
+    tracker = SilhouetteTracker(upright, config, model=init_model,
                                 unknown=unknown_pixels(ws, cameras))
     results: list[FrameResult] = []
 
     with Timer() as timer, _Recorder(ws, upright, frame_rate) as recorder:
-        if init_shape is None and config.shape_frames > 1:
+        if init_model is None and config.shape_frames > 1:
             shape_frames = frames[:config.shape_frames]
             bar = progress_bar(len(shape_frames), "shape", "frame", enabled=progress)
             try:
@@ -169,11 +173,11 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
             bar.set_postfix_str(f"XOR {result.xor_fraction:.0%} {result.event}"[:40])
             bar.update()
         bar.close()
-    if tracker.shape is None or all(r.pose is None for r in results):
+    if tracker.model is None or all(r.pose is None for r in results):
         reasons = sorted({r.event.removeprefix("lost: ") for r in results})
         raise UserError(f"the subject was lost in every frame ({'; '.join(reasons[:3])}"
                         f"{'; ...' if len(reasons) > 3 else ''}); see {ws.log_path('track')}")
-    _write_outputs(outputs, results, tracker.shape, frame_rate, world_from_upright)
+    _write_outputs(outputs, results, tracker.model, frame_rate, world_from_upright)
     tracked = [r for r in results if r.pose is not None]
     summary = {
         "frames": len(results), "tracked": len(tracked),
@@ -182,7 +186,8 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         "median_xor_fraction": float(np.median([r.xor_fraction for r in tracked])),
         "seconds_per_frame": timer.seconds / len(results),
         "evaluations_per_frame": float(np.mean([r.evaluations for r in results])),
-        "height_m": tracker.shape.height, "frame_rate": frame_rate,
+        "height_m": tracker.model.shape.height, "frame_rate": frame_rate,
+        "body": tracker.model.record(),
     }
     ws.record_step("track", fp, outputs=list(outputs.values()), config=settings,
                    seconds=timer.seconds, summary=summary)
@@ -209,6 +214,23 @@ def _all_foreground_message(ws: Workspace, cameras: Sequence[Any], frames: list[
             "track other frames (--first/--last)")
 
 
+def _model_of_pose_file(path: Path, given: Any, body: str) -> TrackedModel:
+    """The body model an ``--init-pose`` file describes, for the tracker's ``body`` plugin; a
+    one-line `UserError` when the file was written for another body model (its poses drive
+    that model's rig, and its shape is that model's)."""
+    from plugins.registry import create
+
+    name = given.body["name"]
+    if name != body:
+        raise UserError(f"{path}: its pose and shape are for the body model {name!r}, not "
+                        f"{body!r}; track with --body {name} or give a pose file of {body}")
+    try:
+        return create("body", body).model_from_record(given.body, given.shape)
+    except ValueError as exc:
+        raise UserError(f"{path}: its body entry does not describe a subject of the "
+                        f"{body} model ({exc})") from None
+
+
 def _upright_frame(cameras: Sequence[Any], masks: Sequence[np.ndarray]) -> np.ndarray:
     """`upright_frame` of the rig around the subject of the first frame's silhouettes (the
     identity when fewer than two views see it)."""
@@ -222,7 +244,7 @@ def _upright_frame(cameras: Sequence[Any], masks: Sequence[np.ndarray]) -> np.nd
     return upright_frame(cameras, subject)
 
 
-def _write_outputs(outputs: dict[str, Path], results: list[FrameResult], shape: BodyShape,
+def _write_outputs(outputs: dict[str, Path], results: list[FrameResult], model: TrackedModel,
                    frame_rate: float, world_from_upright: np.ndarray) -> None:  # fmt: skip
     from tracking.body.bvh import write_bvh
     from tracking.body.motion import motion_from_poses
@@ -234,13 +256,14 @@ def _write_outputs(outputs: dict[str, Path], results: list[FrameResult], shape: 
     for r in results:
         if r.pose is None:
             continue
-        for name, xyz in _nodes(r.pose, shape).items():
+        for name, xyz in zip(NODE_NAMES, model.joints(r.pose), strict=True):
             writer.writerow([r.frame, name, *(f"{v:.6f}" for v in world_from_upright @ xyz)])
     with atomic_output(outputs["joints"]) as partial:
         partial.write_text(text.getvalue())
     write_json_atomic(outputs["pose"], {
         "frame_rate": frame_rate,
-        "shape": dataclasses.asdict(shape),
+        "shape": dataclasses.asdict(model.shape),
+        "body": model.record(),
         "world_from_upright": world_from_upright.tolist(),
         "frames": [{"frame": r.frame,
                     "params": None if r.pose is None else [float(v) for v in r.pose.params],
@@ -254,7 +277,26 @@ def _write_outputs(outputs: dict[str, Path], results: list[FrameResult], shape: 
         last = r.pose if r.pose is not None else last
         held.append(last)
     with atomic_output(outputs["bvh"]) as partial:
-        write_bvh(motion_from_poses(held, shape, 1.0 / frame_rate), partial)
+        write_bvh(motion_from_poses(held, model.shape, 1.0 / frame_rate), partial)
+    write_subject_glb(outputs["glb"], model, held, frame_rate)
+
+
+def write_subject_glb(path: Path, model: TrackedModel, poses: Sequence[Pose],
+                      frame_rate: float) -> None:  # fmt: skip
+    """``path`` (atomically): the subject's full mesh skinned on its skeleton, playing
+    ``poses`` at ``frame_rate`` (`tracking.body.gltf`), in the poses' upright frame."""
+    from tracking.body.gltf import write_skinned_glb
+
+    skin = model.skin()
+    animation = [model.skin_pose(p) for p in poses]
+    with atomic_output(path) as partial:
+        write_skinned_glb(partial, vertices_m=skin.vertices_m, faces=skin.faces,
+                          normals=skin.normals, joint_names=skin.joint_names,
+                          joint_parents=skin.joint_parents, joint_heads_m=skin.joint_heads_m,
+                          skin_weights=skin.weights,
+                          rotations=np.stack([r for r, _ in animation]),
+                          root_translation_m=np.stack([t for _, t in animation]),
+                          frame_rate=frame_rate, name=model.name)
 
 
 class _Recorder:
@@ -275,7 +317,6 @@ class _Recorder:
             recording.log_camera_image(self.rec, image_name=cam.name, image_path=None, K=cam.K,
                                        width=cam.width, height=cam.height,
                                        cam_from_world=cam.cam_from_world)  # fmt: skip
-        self.model: BodyModel | None = None
         return self
 
     def frame(self, tracker: SilhouetteTracker, result: FrameResult, masks: list) -> None:
@@ -285,14 +326,14 @@ class _Recorder:
                 r.log_frame_scalar(self.rec, "track/xor_fraction", result.xor_fraction,
                                    result.frame, t)  # fmt: skip
             return
-        vertices = tracker.model.posed_vertices(result.pose)
+        vertices, normals = tracker.model.posed_surface(result.pose)
         model_masks = render_views(tracker.renderer, vertices, tracker.model.faces, self.cameras)
         for cam, image, model in zip(self.cameras, masks, model_masks, strict=True):
             base = f"world/cameras/{r.entity_name(cam.name)}/image"
             r.log_xor_overlay(self.rec, f"{base}/xor", model, image, result.frame, t)
         r.log_mesh_frame(self.rec, "world/body/mesh", vertices, tracker.model.faces,
-                         result.frame, t)  # fmt: skip
-        joints = np.array([p for p in _nodes(result.pose, tracker.shape).values()])
+                         result.frame, t, normals)  # fmt: skip
+        joints = tracker.model.joints(result.pose)
         r.log_skeleton_frame(self.rec, "world/body/skeleton", joints, result.frame, t)
         r.log_frame_scalar(self.rec, "track/xor_fraction", result.xor_fraction, result.frame, t)
         r.log_frame_scalar(self.rec, "track/energy_px", result.energy, result.frame, t)

@@ -60,14 +60,13 @@ from tracking.body.model import (
     NODE_INDEX,
     PARAM_INDEX,
     PARAM_MOVES_NODE,
-    SHAPE_GROUPS,
     UPPER_LIMITS,
     BodyModel,
     BodyShape,
     Pose,
+    TrackedModel,
     forward_kinematics,
     root_rotation,
-    scaled_shape,
 )
 from tracking.rig.cameras import rig_up
 from tracking.silhouettes.hull import check_voxel_grid, surface_voxels, visual_hull
@@ -185,6 +184,12 @@ class TrackConfig:
     renderer: str = field(
         default="cpu-raster", metadata={"help": "silhouette renderer plugin (mocap plugins)"}
     )
+    body: str = field(
+        default="superquadric",
+        metadata={"help": "body model plugin the tracker fits (mocap plugins): superquadric "
+                  "(the thesis' rigid segments) or mpfb (MakeHuman's skinned body, its macro "
+                  "shape and loose clothing refined from the silhouettes)"},
+    )  # fmt: skip
 
     def __post_init__(self) -> None:
         from recon.errors import UserError
@@ -248,7 +253,7 @@ class _StageEnergy:
         self.free = np.asarray(free)
         model = energy.model
         moved_nodes = _MOVES[self.free].any(axis=0)
-        moving = moved_nodes[model.node_of_segment[model.segment_of_face]]
+        moving = model.faces_moved_by(moved_nodes)
         self.faces = model.faces[moving]
         self.cameras = energy.cameras[level]
         self.masks = energy.masks[level]
@@ -301,15 +306,17 @@ def _simplex(fun: Callable[[np.ndarray], float], x0: np.ndarray, steps: np.ndarr
 class SilhouetteTracker:
     """Tracks one subject through a sequence of multi-view silhouettes (see module docstring).
 
-    cameras: the calibrated views; shape: the subject's scale parameters (fixed, thesis 6.2.4),
-    or None to estimate them at initialisation; unknown: per view, None or the (H, W) bool
-    pixels whose label the silhouettes cannot tell (no background known behind them): they
-    count in no energy, and do not carve the visual hull.
+    cameras: the calibrated views; model: the subject's body (`TrackedModel`, its shape fixed,
+    thesis 6.2.4), or None to estimate it at initialisation from the ``config.body`` plugin's
+    model (``shape``: a known `BodyShape` of the thesis' model instead); unknown: per view,
+    None or the (H, W) bool pixels whose label the silhouettes cannot tell (no background
+    known behind them): they count in no energy, and do not carve the visual hull.
     """
 
     def __init__(self, cameras: Sequence[Camera], config: TrackConfig | None = None,
                  shape: BodyShape | None = None,
-                 unknown: Sequence[np.ndarray | None] | None = None) -> None:  # fmt: skip
+                 unknown: Sequence[np.ndarray | None] | None = None,
+                 model: TrackedModel | None = None) -> None:  # fmt: skip
         from plugins.registry import create
 
         self.cameras = list(cameras)
@@ -317,8 +324,10 @@ class SilhouetteTracker:
         self.known = [None if u is None else ~np.asarray(u, bool) for u in self.unknown]
         self.config = config or TrackConfig()
         self.renderer = create("renderer", self.config.renderer)
-        self.shape = shape
-        self.model = BodyModel(shape) if shape is not None else None
+        self.body = create("body", self.config.body)
+        if shape is not None and model is not None:
+            raise ValueError("give the tracker a shape or a model, not both")
+        self.model: TrackedModel | None = BodyModel(shape) if shape is not None else model
         self.history: list[np.ndarray] = []  # params of the last tracked frames
         self._xor_floor = np.inf  # XOR fraction of the best initialisation (divergence test)
         # (the frame's energy, level, its outline refiner): built once per frame and level
@@ -327,6 +336,11 @@ class SilhouetteTracker:
         # How `calibrate_shape` found the pose it returns: the first tracked frame starts from
         # it as from a given pose, and says this instead.
         self._start_event = ""
+
+    @property
+    def shape(self) -> BodyShape | None:
+        """The subject's skeleton (`TrackedModel.shape`), None until it is estimated."""
+        return None if self.model is None else self.model.shape
 
     # -- initialisation -------------------------------------------------------------------
     def visual_hull_points(self, masks: Sequence[np.ndarray]) -> np.ndarray:
@@ -362,8 +376,7 @@ class SilhouetteTracker:
                 if up is not None:
                     extent = float(np.ptp(points @ up)) + self.config.voxel_m
                     height = min(height, 1.05 * extent)
-                self.shape = BodyShape.default(height)
-                self.model = BodyModel(self.shape)
+                self.model = self.body.tracking_model(height)
             # The hull fit can put a limb inside the trunk or lean the trunk to explain a
             # limb: upright bodies at several headings compete with it (each refined by the
             # whole hierarchy, limb grids over their whole range); the lowest XOR wins.
@@ -413,27 +426,23 @@ class SilhouetteTracker:
 
     def _refine_shape(self, sequence: Sequence[Sequence[np.ndarray]], poses: Sequence[Pose],
                       iterations: int = 30) -> list[Pose]:  # fmt: skip
-        """Segment-length scales (`SHAPE_GROUPS`) and the poses of one or more frames
-        together, by Gauss-Newton on the silhouette outlines
-        (`tracking.track.contour.refine_shape`);
-        sets the shape and returns the poses."""
-        assert self.shape is not None
+        """The model's shape parameters (`TrackedModel.shape_parameters`: the segment-length
+        scales of `SHAPE_GROUPS`, or a skinned body's macro modifiers) and the poses of one or
+        more frames together, by Gauss-Newton on the silhouette outlines
+        (`tracking.track.contour.refine_shape`); sets the model and returns the poses."""
+        assert self.model is not None
         level = self.config.contour_level
-        base = self.shape
         energies = [self._energy(masks) for masks in sequence]
 
-        def energy(model: BodyModel, xs: Sequence[np.ndarray]) -> float:
+        def energy(model: TrackedModel, xs: Sequence[np.ndarray]) -> float:
             self.evaluations += len(xs)
             return sum(e.with_model(model)(Pose(x), level)
                        for e, x in zip(energies, xs, strict=True))  # fmt: skip
 
-        scales, xs, _ = refine_shape(
-            base, np.ones(len(SHAPE_GROUPS)),
-            [(e.cameras[level], e.masks[level], e.known[level]) for e in energies],
-            [p.params for p in poses],
-            self.renderer, energy, ContourConfig(iterations=iterations))
-        self.shape = scaled_shape(base, scales)
-        self.model = BodyModel(self.shape)
+        self.model, xs, _ = refine_shape(
+            self.model, [(e.cameras[level], e.masks[level], e.known[level]) for e in energies],
+            [p.params for p in poses], self.renderer, energy,
+            ContourConfig(iterations=iterations))
         return [Pose(x) for x in xs]
 
     def calibrate_shape(self, sequence: Sequence[Sequence[np.ndarray]],

@@ -414,6 +414,8 @@ class PosedBody:
     bone_tails_m: np.ndarray
     head_top_m: np.ndarray
     world_from_bone: np.ndarray
+    normals: np.ndarray | None = None
+    """(V or Vd, 3) unit normals, when `posed_vertices` was given the rest normals."""
 
 
 def identity_rotations(assets: MpfbAssets) -> np.ndarray:
@@ -443,12 +445,16 @@ def forward_kinematics(assets: MpfbAssets, rest: RestBody, rotations: np.ndarray
 
 def posed_vertices(assets: MpfbAssets, rest: RestBody, rotations: np.ndarray,
                    root_translation_m: np.ndarray | Sequence[float] = (0.0, 0.0, 0.0), *,
-                   vertex_indices: np.ndarray | None = None) -> PosedBody:
+                   vertex_indices: np.ndarray | None = None,
+                   rest_normals: np.ndarray | None = None) -> PosedBody:
     """The rest body posed by linear blend skinning (see the module docstring for the frames).
 
     rotations: (B, 3, 3) ``parent_from_bone`` per rig bone (`MpfbAssets.bone_names` order);
     root_translation_m: (3,) displacement of the root from its rest position. vertex_indices:
     pose only these vertices (e.g. `MpfbAssets.decimated_vertex_indices`); default all.
+    rest_normals: the (V or Vd, 3) normals of those vertices at rest, to turn with them (by
+    the blended rotation, renormalised: the normals of the skinned surface up to the blend's
+    shear near the joints).
     """
     rotations = np.asarray(rotations, dtype=np.float64)
     translation = np.asarray(root_translation_m, dtype=np.float64)
@@ -470,7 +476,11 @@ def posed_vertices(assets: MpfbAssets, rest: RestBody, rotations: np.ndarray,
     # The crown's only skinning weight is Head's, so carrying it rigidly is its skinned position.
     b = assets.bone(HEAD_TOP_BONE)
     top = heads[b] + world_from_bone[b] @ (rest.head_top_m - rest.bone_heads_m[b])
-    return PosedBody(posed, heads, tails, top, world_from_bone)
+    normals = None
+    if rest_normals is not None:
+        normals = np.einsum("vij,vj->vi", blended[:, :, :3], rest_normals)
+        normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    return PosedBody(posed, heads, tails, top, world_from_bone, normals)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -13,38 +13,11 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar
 
-import numpy as np
-
 from plugins.protocols import Plugin, PosedBody
 from plugins.registry import PluginError
 
 if TYPE_CHECKING:  # `mocap plugins` lists this module: the model is imported when used
     from tracking.body.model import BodyShape, Pose
-
-CLOTHED_BONES: tuple[str, ...] = (
-    "Hips", "LHipJoint", "RHipJoint", "LowerBack", "Spine", "Spine1",
-    "LeftUpLeg", "RightUpLeg", "LeftLeg", "RightLeg")  # fmt: skip
-"""The bones whose skin loose clothing covers: trunk, hips, thighs and shanks (not the arms,
-the neck, the head, the hands or the feet)."""
-
-
-def clothed(assets: Any, rest: Any, thickness_m: float) -> Any:
-    """``rest`` (`tracking.body.mpfb.model.RestBody`) with the vertices that `CLOTHED_BONES`
-    carry (by at least half of their skinning weight) pushed out along their normals by
-    ``thickness_m``, fading to nothing where that weight falls from 1 to 0.5 (the waistband,
-    the neckline, the cuffs)."""
-    if thickness_m == 0.0:
-        return rest
-    from recon.mesh.normals import vertex_normals
-
-    columns = [assets.bone(name) for name in CLOTHED_BONES]
-    covered = assets.skin_weight_matrix[:, columns].sum(axis=1)
-    fade = np.clip(2.0 * covered - 1.0, 0.0, 1.0)
-    normals = vertex_normals(rest.vertices_m, assets.faces)
-    vertices = rest.vertices_m + thickness_m * fade[:, None] * normals
-    vertices.flags.writeable = False
-    return dataclasses.replace(rest, vertices_m=vertices)
-
 
 class MpfbBody(Plugin):
     """MakeHuman's CC0 body, skinned on the cmu_mb rig, shaped by its macro modifiers."""
@@ -72,57 +45,41 @@ class MpfbBody(Plugin):
                                   "proportions")
 
     def __init__(self, options: Options) -> None:
-        from tracking.body.model import NODE_INDEX, BodyShape, Pose
-        from tracking.body.mpfb.model import (
-            MacroShape,
-            load_assets,
-            named_joints,
-            posed_vertices,
-            rest_body,
-        )
-        from tracking.body.mpfb.retarget import Rig, limb_corrections, rig_rotations
+        from tracking.body.mpfb.model import MacroShape
+        from tracking.body.mpfb.subject import MpfbModel
 
         super().__init__(options)
-        if options.mesh not in ("full", "decimated"):
-            raise PluginError(f"body plugin 'mpfb': mesh must be 'full' or 'decimated', got "
-                              f"{options.mesh!r}")
         macro = {f.name: getattr(options, f.name) for f in dataclasses.fields(MacroShape)}
         try:
-            self.shape = MacroShape(**macro)
+            self.model = MpfbModel(MacroShape(**macro), options.clothes_cm, options.mesh)
         except ValueError as exc:
             raise PluginError(f"body plugin 'mpfb': {exc}") from None
-        if not 0.0 <= options.clothes_cm <= 10.0:
-            raise PluginError(f"body plugin 'mpfb': clothes_cm must be in 0..10, got "
-                              f"{options.clothes_cm}")
-        self.assets = load_assets()
-        self.rest = clothed(self.assets, rest_body(self.assets, self.shape),
-                            options.clothes_cm / 100.0)
-        rig = Rig(self.assets.bone_names, np.asarray(self.assets.bone_parents),
-                  self.rest.bone_heads_m, self.rest.bone_tails_m, 0.0)
-        self.corrections = limb_corrections(rig)
-        # The legs turned to hang straight reach lower than in MPFB's rest: the floor that
-        # sets the hip height is the lowest vertex of the rest pose of ours (any skeleton).
-        rotations, root = rig_rotations(rig, Pose.neutral(), BodyShape.default(),
-                                        self.corrections)
-        straight = posed_vertices(self.assets, self.rest, rotations, root)
-        pelvis = named_joints(self.assets, straight)[NODE_INDEX["pelvis"]]
-        floor_y = rig.hip_centre[1] - (pelvis[1] - straight.vertices_m[:, 1].min())
-        self.rig = dataclasses.replace(rig, floor_y=float(floor_y))
-        if options.mesh == "decimated":
-            self.vertex_indices: np.ndarray | None = self.assets.decimated_vertex_indices
-            self.faces = self.assets.decimated_faces
-        else:
-            self.vertex_indices, self.faces = None, self.assets.faces
+
+    @property
+    def assets(self) -> Any:
+        return self.model.assets
 
     def posed(self, pose: Pose, skeleton: BodyShape) -> PosedBody:
-        from tracking.body.mpfb.model import named_joints, posed_vertices
-        from tracking.body.mpfb.retarget import rig_rotations
+        from tracking.body.mpfb.model import named_joints
 
-        rotations, root = rig_rotations(self.rig, pose, skeleton, self.corrections)
-        body = posed_vertices(self.assets, self.rest, rotations, root,
-                              vertex_indices=self.vertex_indices)
-        return PosedBody(vertices=body.vertices_m, faces=self.faces,
-                         joints=named_joints(self.assets, body))
+        body = self.model.posed_body(pose, skeleton)
+        return PosedBody(vertices=body.vertices_m, faces=self.model.faces,
+                         joints=named_joints(self.model.assets, body))
+
+    def tracking_model(self, height_m: float) -> Any:
+        """The tracker's start: MakeHuman's average subject of this stature, decimated,
+        unclothed (`tracking.body.mpfb.subject.MpfbModel.of_height`); this plugin's own
+        options describe a subject to render, not the tracker's guess."""
+        from tracking.body.mpfb.subject import MpfbModel
+
+        return MpfbModel.of_height(height_m)
+
+    def model_from_record(self, record: dict[str, Any], skeleton: BodyShape) -> Any:
+        """The tracking model a pose file's ``body`` entry describes (ValueError if it does
+        not); ``skeleton``, the file's shape, follows from it."""
+        from tracking.body.mpfb.subject import MpfbModel
+
+        return MpfbModel.from_record(record)
 
     def __getstate__(self) -> dict[str, Any]:  # the arrays reload from the package data
         return {"options": self.options}
