@@ -31,10 +31,11 @@ arms (`swap_sides`) are each refined against the outlines. The best of them comp
 upright stances at `init_headings` headings (`upright_starts`), since the fit can fold a limb
 into the trunk or lean the trunk to explain a limb: each is refined by the whole hierarchy with
 the limbs' grids over their whole range, and the lowest XOR wins. When the shape is unknown,
-the segment lengths then come from the outlines, and `calibrate_shape` refines them over
-several frames of a first pass. The rotation angles of the root lock at a 90 degree pitch, so
-an upright body should be tracked in a Y-up frame (`tracking.rig.cameras.upright_frame`; `mocap
-track` does). A pose given by the user
+the shape parameters (the segment lengths, or the skinned body's macro shape and clothing:
+`TrackedModel.shape_parameters`) then come from the outlines, and `calibrate_shape` refines
+them over several frames of a first pass. The rotation angles of the root lock at a 90
+degree pitch, so an upright body should be tracked in a Y-up frame
+(`tracking.rig.cameras.upright_frame`; `mocap track` does). A pose given by the user
 replaces this ("model alignment", thesis 6.2.4).
 
 A frame whose energy stays above `max_xor_fraction` of the silhouette area (or 1.5 times the
@@ -327,6 +328,8 @@ class SilhouetteTracker:
         self.body = create("body", self.config.body)
         if shape is not None and model is not None:
             raise ValueError("give the tracker a shape or a model, not both")
+        if model is not None and model.name != self.config.body:
+            raise ValueError(f"a {model.name} model for a tracker of body {self.config.body!r}")
         self.model: TrackedModel | None = BodyModel(shape) if shape is not None else model
         self.history: list[np.ndarray] = []  # params of the last tracked frames
         self._xor_floor = np.inf  # XOR fraction of the best initialisation (divergence test)

@@ -74,6 +74,7 @@ import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -443,10 +444,30 @@ def forward_kinematics(assets: MpfbAssets, rest: RestBody, rotations: np.ndarray
     return world_from_bone, posed_heads
 
 
+class BoundVertices(NamedTuple):
+    """Rest vertices ready to skin: their (V, 4) bones and weights and (V, 3) positions."""
+
+    bones: np.ndarray
+    weights: np.ndarray
+    vertices_m: np.ndarray
+
+
+def bind_vertices(assets: MpfbAssets, rest: RestBody,
+                  vertex_indices: np.ndarray | None = None) -> BoundVertices:
+    """The skinning inputs of the rest vertices ``vertex_indices`` (default all), contiguous."""
+    bones, weights, vertices = assets.skin_bone_indices, assets.skin_weights, rest.vertices_m
+    if vertex_indices is not None:
+        bones, weights = bones[vertex_indices], weights[vertex_indices]
+        vertices = vertices[vertex_indices]
+    return BoundVertices(np.ascontiguousarray(bones), np.ascontiguousarray(weights),
+                         np.ascontiguousarray(vertices, dtype=np.float64))
+
+
 def posed_vertices(assets: MpfbAssets, rest: RestBody, rotations: np.ndarray,
                    root_translation_m: np.ndarray | Sequence[float] = (0.0, 0.0, 0.0), *,
                    vertex_indices: np.ndarray | None = None,
-                   rest_normals: np.ndarray | None = None) -> PosedBody:
+                   rest_normals: np.ndarray | None = None,
+                   bound: BoundVertices | None = None) -> PosedBody:
     """The rest body posed by linear blend skinning (see the module docstring for the frames).
 
     rotations: (B, 3, 3) ``parent_from_bone`` per rig bone (`MpfbAssets.bone_names` order);
@@ -454,7 +475,8 @@ def posed_vertices(assets: MpfbAssets, rest: RestBody, rotations: np.ndarray,
     pose only these vertices (e.g. `MpfbAssets.decimated_vertex_indices`); default all.
     rest_normals: the (V or Vd, 3) normals of those vertices at rest, to turn with them (by
     the blended rotation, renormalised: the normals of the skinned surface up to the blend's
-    shear near the joints).
+    shear near the joints). bound: those vertices' `bind_vertices`, kept by a caller that
+    poses the same vertices over and over (it replaces vertex_indices).
     """
     rotations = np.asarray(rotations, dtype=np.float64)
     translation = np.asarray(root_translation_m, dtype=np.float64)
@@ -466,20 +488,18 @@ def posed_vertices(assets: MpfbAssets, rest: RestBody, rotations: np.ndarray,
     skin = np.empty((assets.n_bones, 3, 4))
     skin[:, :, :3] = world_from_bone
     skin[:, :, 3] = heads - (world_from_bone @ rest.bone_heads_m[..., None])[..., 0]
-    weights = assets.skin_weight_matrix
-    vertices = rest.vertices_m
-    if vertex_indices is not None:
-        weights, vertices = weights[vertex_indices], vertices[vertex_indices]
-    blended = (weights @ skin.reshape(assets.n_bones, 12)).reshape(-1, 3, 4)
-    posed = np.einsum("vij,vj->vi", blended[:, :, :3], vertices) + blended[:, :, 3]
+    from tracking.body.mpfb.skinning import blend_skin
+
+    bones, weights, vertices = bound or bind_vertices(assets, rest, vertex_indices)
+    posed = np.empty((len(vertices), 3))
+    normals = None if rest_normals is None else np.empty((len(vertices), 3))
+    blend_skin(skin, bones, weights, vertices, np.zeros((0, 3)) if rest_normals is None
+               else np.ascontiguousarray(rest_normals, dtype=np.float64),
+               posed, np.zeros((0, 3)) if normals is None else normals)
     tails = heads + (world_from_bone @ (rest.bone_tails_m - rest.bone_heads_m)[..., None])[..., 0]
     # The crown's only skinning weight is Head's, so carrying it rigidly is its skinned position.
     b = assets.bone(HEAD_TOP_BONE)
     top = heads[b] + world_from_bone[b] @ (rest.head_top_m - rest.bone_heads_m[b])
-    normals = None
-    if rest_normals is not None:
-        normals = np.einsum("vij,vj->vi", blended[:, :, :3], rest_normals)
-        normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
     return PosedBody(posed, heads, tails, top, world_from_bone, normals)
 
 

@@ -27,6 +27,7 @@ knee the shank, the foot and the toes.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -73,6 +74,11 @@ class Rig:
             raise ValueError(f"not the cmu_mb rig: missing {missing}, unknown {unknown}")
         if any(p >= i for i, p in enumerate(self.parents)):
             raise ValueError("rig bones must come after their parents")
+
+    @cached_property
+    def node_of_bone(self) -> np.ndarray:
+        """(B,) the index in `NODE_NAMES` of the node each bone follows (`NODE_OF_BONE`)."""
+        return np.array([NODE_INDEX[NODE_OF_BONE[name]] for name in self.names])
 
     def index(self, name: str) -> int:
         return self.names.index(name)
@@ -139,8 +145,7 @@ def rig_rotations(rig: Rig, pose: Pose, skeleton: BodyShape,
     corrections = limb_corrections(rig) if corrections is None else corrections
     world_from_node = forward_kinematics(pose, skeleton)
     node_rotation = world_from_node[:, :3, :3]
-    world = np.stack([node_rotation[NODE_INDEX[NODE_OF_BONE[name]]] @ corrections[b]
-                      for b, name in enumerate(rig.names)])  # fmt: skip
+    world = node_rotation[rig.node_of_bone] @ corrections
     local = world.copy()
     has_parent = rig.parents >= 0
     local[has_parent] = np.einsum("bji,bjk->bik", world[rig.parents[has_parent]],

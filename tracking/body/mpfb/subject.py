@@ -44,6 +44,7 @@ from tracking.body.model import (
 from tracking.body.mpfb.model import (
     MacroShape,
     MpfbAssets,
+    bind_vertices,
     load_assets,
     named_joints,
     posed_vertices,
@@ -189,9 +190,13 @@ class MpfbModel:
         """`tracking.body.mpfb.model.PosedBody` of ``pose``; ``skeleton``: the shape the pose
         was retargeted to, which sets only the floor (default: this subject's own)."""
         rotations, root = self._rotations(pose, skeleton)
-        return posed_vertices(self.assets, self.rest, rotations, root,
-                              vertex_indices=self.vertex_indices,
+        return posed_vertices(self.assets, self.rest, rotations, root, bound=self._bound,
                               rest_normals=self.rest_normals if normals else None)
+
+    @cached_property
+    def _bound(self) -> Any:
+        """This resolution's vertices ready to skin (`bind_vertices`), made once."""
+        return bind_vertices(self.assets, self.rest, self.vertex_indices)
 
     def posed_vertices(self, pose: Pose) -> np.ndarray:
         """(V, 3) world vertices in ``pose``."""

@@ -1,0 +1,45 @@
+"""The compiled linear-blend-skinning kernel of `tracking.body.mpfb.model.posed_vertices`.
+
+Apart from the model so that the ``mpfb`` plugin's module, which ``mocap plugins`` imports to
+list it, does not import numba; it is imported on the first posing.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True, nogil=True)
+def blend_skin(skin: np.ndarray, bones: np.ndarray, weights: np.ndarray, vertices: np.ndarray,
+               normals: np.ndarray, out_vertices: np.ndarray, out_normals: np.ndarray,
+               ) -> None:  # fmt: skip
+    """out_vertices[v] = sum_k weights[v, k] skin[bones[v, k]] (vertices[v], 1): the skinning
+    matrices (B, 3, 4) blended by each vertex's (up to 4) weights, applied to it; with
+    ``normals`` of the same length as ``vertices`` the blended rotation turns them into
+    ``out_normals``, renormalised (an empty ``normals`` skips them)."""
+    with_normals = normals.shape[0] == vertices.shape[0]
+    m = np.empty((3, 4))
+    for v in range(vertices.shape[0]):
+        for i in range(3):
+            for j in range(4):
+                m[i, j] = 0.0
+        for k in range(bones.shape[1]):
+            w = weights[v, k]
+            if w != 0.0:
+                b = bones[v, k]
+                for i in range(3):
+                    for j in range(4):
+                        m[i, j] += w * skin[b, i, j]
+        x, y, z = vertices[v, 0], vertices[v, 1], vertices[v, 2]
+        for i in range(3):
+            out_vertices[v, i] = m[i, 0] * x + m[i, 1] * y + m[i, 2] * z + m[i, 3]
+        if with_normals:
+            a, b, c = normals[v, 0], normals[v, 1], normals[v, 2]
+            norm = 0.0
+            for i in range(3):
+                out_normals[v, i] = m[i, 0] * a + m[i, 1] * b + m[i, 2] * c
+                norm += out_normals[v, i] ** 2
+            norm = max(np.sqrt(norm), 1e-12)
+            for i in range(3):
+                out_normals[v, i] /= norm
