@@ -712,7 +712,7 @@ class BodyModel:
     def segment_names(self) -> tuple[str, ...]:
         return tuple(s.name for s in self.segments)
 
-    # -- what the tracker asks of a body model (`tracking.track.tracker.TrackedModel`) -------
+    # -- what the tracker asks of a body model (`TrackedModel`) -------------------------------
 
     name: ClassVar[str] = "superquadric"
     """The ``mocap.body`` plugin whose model this is."""
@@ -732,10 +732,9 @@ class BodyModel:
 
     def posed_surface(self, pose: Pose) -> tuple[np.ndarray, np.ndarray]:
         """(V, 3) world vertices and (V, 3) their unit outward normals in `pose`."""
-        world = forward_kinematics(pose, self.shape)[self.node_of_segment[self.segment_of_vertex]]
-        rot = world[:, :3, :3]
-        return (np.einsum("vij,vj->vi", rot, self.vertex_in_node) + world[:, :3, 3],
-                np.einsum("vij,vj->vi", rot, self.vertex_normals_in_node))
+        world = self._world_from_vertex_node(pose)
+        return (self._posed(world),
+                np.einsum("vij,vj->vi", world[:, :3, :3], self.vertex_normals_in_node))
 
     def joints(self, pose: Pose) -> np.ndarray:
         """(16, 3) world positions of the nodes of `NODE_NAMES` in `pose`."""
@@ -770,12 +769,15 @@ class BodyModel:
 
     def posed_vertices(self, pose: Pose) -> np.ndarray:
         """(V, 3) world vertex positions in `pose`."""
-        world_from_node = forward_kinematics(pose, self.shape)
-        world_from_vertex_node = world_from_node[self.node_of_segment[self.segment_of_vertex]]
-        return (
-            np.einsum("vij,vj->vi", world_from_vertex_node[:, :3, :3], self.vertex_in_node)
-            + world_from_vertex_node[:, :3, 3]
-        )
+        return self._posed(self._world_from_vertex_node(pose))
+
+    def _world_from_vertex_node(self, pose: Pose) -> np.ndarray:
+        """(V, 4, 4) the world_from_node transform of each vertex's node in `pose`."""
+        return forward_kinematics(pose, self.shape)[self.node_of_segment[self.segment_of_vertex]]
+
+    def _posed(self, world_from_vertex_node: np.ndarray) -> np.ndarray:
+        return (np.einsum("vij,vj->vi", world_from_vertex_node[:, :3, :3], self.vertex_in_node)
+                + world_from_vertex_node[:, :3, 3])
 
 
 class TrackedModel(Protocol):

@@ -38,11 +38,9 @@ class SuperquadricBody(Plugin):
         return self._model
 
     def posed(self, pose: Pose, skeleton: BodyShape) -> PosedBody:
-        from tracking.body.model import forward_kinematics
-
         model = self.model(skeleton)
         return PosedBody(vertices=model.posed_vertices(pose), faces=model.faces,
-                         joints=forward_kinematics(pose, skeleton)[:, :3, 3])
+                         joints=model.joints(pose))
 
     def tracking_model(self, height_m: float) -> BodyModel:
         """The tracker's start: `BodyShape.default`'s proportions of this stature."""
@@ -55,4 +53,3 @@ class SuperquadricBody(Plugin):
         from tracking.body.model import BodyModel
 
         return BodyModel(skeleton)
-

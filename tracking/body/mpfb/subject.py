@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cache, cached_property
 from typing import Any, ClassVar
 
 import numpy as np
@@ -67,15 +67,10 @@ MOVING_WEIGHT: float = 1e-3
 smaller weight moves it less than 1 mm for a 1 m displacement of the bone, which the
 tracker's stages may ignore (they re-render only the triangles their parameters move)."""
 
-_ASSETS: MpfbAssets | None = None
-
-
+@cache
 def shared_assets() -> MpfbAssets:
     """The packaged assets, read once per process (`load_assets`)."""
-    global _ASSETS
-    if _ASSETS is None:
-        _ASSETS = load_assets()
-    return _ASSETS
+    return load_assets()
 
 
 def clothed(assets: MpfbAssets, rest: Any, thickness_m: float) -> Any:
