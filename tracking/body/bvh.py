@@ -425,6 +425,39 @@ def local_rotations(motion: Motion) -> np.ndarray:
     return rot
 
 
+REFERENCE_TURN_DEG = 20.0
+"""A joint "jumps" between two frames when its local rotation turns by more than this."""
+REFERENCE_MIN_JOINTS = 4
+"""Frame 0 is a reference pose when at least this many joints jump into frame 1 ..."""
+
+
+def joint_turns_deg(motion: Motion) -> np.ndarray:
+    """(F-1, J) each joint's turn (geodesic angle of its local rotation) from each frame to the
+    next, in degrees; an Euler wrap-around (179 to -179) counts as the 2 degrees it is."""
+    rot = local_rotations(motion)
+    relative = np.einsum("fjba,fjbc->fjac", rot[:-1], rot[1:])  # R_k^T R_k+1
+    cos = np.clip((np.trace(relative, axis1=-2, axis2=-1) - 1) / 2, -1.0, 1.0)
+    return np.degrees(np.arccos(cos))
+
+
+def leading_reference_frames(motion: Motion) -> int:
+    """1 when frame 0 is a reference pose rather than motion, else 0.
+
+    Many BVH conversions of the CMU database put the skeleton's T-pose in frame 0 and the
+    capture from frame 1; played as motion, that frame is a teleport no body makes. Of the 12
+    clips with CMU names in ``shared/data/mocap_bvh``, 9 turn 9-16 joints by more than
+    `REFERENCE_TURN_DEG` from frame 0 to 1, where no later step of any clip (120 Hz) turns more
+    than 2 joints that far (a wrist or toe glitch); the other 3 (walk, start-walk-stop, wave)
+    start moving at once (no joint jumps). Frame 0 is a reference pose when at least
+    `REFERENCE_MIN_JOINTS` joints jump into frame 1, more than twice as many as in any later
+    step. (The 3 clips with Daz names jump 3 joints there: too few to tell, so they are kept.)
+    """
+    if motion.num_frames < 3:
+        return 0
+    jumps = (joint_turns_deg(motion) > REFERENCE_TURN_DEG).sum(axis=1)
+    return int(jumps[0] >= max(REFERENCE_MIN_JOINTS, 2 * jumps[1:].max() + 1))
+
+
 def local_translations(motion: Motion) -> np.ndarray:
     """(F, J, 3) joint positions in the parent frame: OFFSET plus any position channels."""
     translation = np.broadcast_to(motion.offsets, (motion.num_frames, motion.num_joints, 3)).copy()

@@ -164,14 +164,20 @@ def poses_from_motion(motion: Motion) -> tuple[list[Pose], BodyShape]:
     return [Pose(row) for row in params], shape
 
 
+def zxy_twin(zxy: np.ndarray) -> np.ndarray:
+    """(..., 3) the other ZXY angle triple of the same rotations: (z + 180, 180 - x, y + 180)
+    degrees, wrapped into [-180, 180)."""
+    twin = np.asarray(zxy, float) + np.array([np.pi, 0.0, np.pi])
+    twin[..., 1] = np.pi - np.asarray(zxy)[..., 1]
+    return np.mod(twin + np.pi, 2 * np.pi) - np.pi
+
+
 def _ball_angles_in_limits(zxy: np.ndarray, owned: list[int]) -> np.ndarray:
     """Of the two ZXY angle triples (F, 3) of each rotation, (z, x, y) and
     (z + 180, 180 - x, y + 180) degrees, the one nearer the joint's limits (`owned`: its three
     parameter indices): a shoulder lifted 120 degrees forward has x = -120 within its range, but
     the decomposition returns the twin with x = -60 and its twist 180 degrees out of range."""
-    twin = zxy + np.array([np.pi, 0.0, np.pi])
-    twin[:, 1] = np.pi - zxy[:, 1]
-    twin = np.mod(twin + np.pi, 2 * np.pi) - np.pi  # back into [-180, 180)
+    twin = zxy_twin(zxy)
 
     def excess(angles: np.ndarray) -> np.ndarray:
         lo, hi = LOWER_LIMITS[owned], UPPER_LIMITS[owned]

@@ -14,7 +14,9 @@ video workspace (`recon.workspace`)::
     WS/run.json                            step "synth": config, fingerprint, timing, summary
 
 World frame: the BVH's, metres, Y up (so the floor is horizontal). Frame k of the sequence is
-clip frame ``first + k * step``; the frame rate is the clip's divided by ``step``.
+clip frame ``first + k * step``; the frame rate is the clip's divided by ``step``. Unless
+``first_frame`` is given, ``first`` skips a reference T-pose in frame 0
+(`tracking.body.bvh.leading_reference_frames`).
 
 Cameras: ``cameras`` pinholes evenly on a horizontal circle around the subject's mean pelvis
 position, ``camera_height_m`` above the floor, all looking at the subject's mean position at
@@ -68,7 +70,7 @@ from recon.workspace import (
     fingerprint,
     write_json_atomic,
 )
-from tracking.body.bvh import CMU_METRES_PER_UNIT, Motion, read_bvh
+from tracking.body.bvh import CMU_METRES_PER_UNIT, Motion, leading_reference_frames, read_bvh
 from tracking.body.model import BONES, NODE_NAMES, BodyShape, Pose
 from tracking.rig.cameras import ring_cameras
 from tracking.rig.synth_video import RENDER_DIR, VIDEO_SUFFIX, SyntheticVideos
@@ -95,6 +97,10 @@ class SynthConfig:
     frames: int | None = field(
         default=None, metadata={"help": "keep the first N frames after subsampling "
                                 "(default: all)"})
+    first_frame: int | None = field(
+        default=None, metadata={"help": "first clip frame (default: 1 when clip frame 0 is a "
+                                "reference pose, such as the T-pose many CMU conversions start "
+                                "with, else 0)", "metavar": "FRAME"})
     step: int | None = field(
         default=None, metadata={"help": "keep every K-th clip frame (default: the step that "
                                 "comes closest to --fps)"})
@@ -225,22 +231,26 @@ def _check_config(config: SynthConfig) -> None:
 
 
 def select_clip_frames(num_frames: int, clip_fps: float, *, step: int | None, fps: float,
-                       frames: int | None) -> tuple[np.ndarray, int]:  # fmt: skip
+                       frames: int | None, first: int = 0) -> tuple[np.ndarray, int]:  # fmt: skip
     """Clip frame indices (N,) of the sequence and the step between them.
 
-    ``step`` defaults to ``round(clip_fps / fps)`` (at least 1); ``frames`` takes the first N
-    of the subsampled frames (default all; out of range is a UserError).
+    The sequence starts at clip frame ``first``; ``step`` defaults to ``round(clip_fps / fps)``
+    (at least 1); ``frames`` takes the first N of the subsampled frames (default all; out of
+    range is a UserError).
     """
     if step is not None and step < 1:
         raise UserError(f"--step {step}: must be 1 or more")
+    if not 0 <= first < num_frames:
+        raise UserError(f"--first-frame {first}: the clip has frames 0..{num_frames - 1}")
     step = step if step is not None else max(1, round(clip_fps / fps))
-    available = len(range(0, num_frames, step))
+    available = len(range(first, num_frames, step))
     if frames is None:
         frames = available
     elif not 1 <= frames <= available:
-        raise UserError(f"--frames {frames}: the clip has {available} frames at step {step} "
-                        f"({num_frames} at {clip_fps:.4g} Hz); choose 1..{available}")
-    return np.arange(frames) * step, step
+        raise UserError(f"--frames {frames}: the clip has {available} frames from frame {first} "
+                        f"at step {step} ({num_frames} at {clip_fps:.4g} Hz); choose "
+                        f"1..{available}")
+    return first + np.arange(frames) * step, step
 
 
 # ---------------------------------------------------------------------------------------------
@@ -491,8 +501,10 @@ def synthesize(ws_root: Path | str, config: SynthConfig, *,
         return SynthSummary(ws.root, done.summary, reused=True)
 
     motion = _read_motion(config.bvh)
+    first = (leading_reference_frames(motion) if config.first_frame is None
+             else config.first_frame)
     clip_frames, step = select_clip_frames(motion.num_frames, motion.fps, step=config.step,
-                                           fps=config.fps, frames=config.frames)
+                                           fps=config.fps, frames=config.frames, first=first)
     frame_rate = motion.fps / step
     renderer = create("renderer", config.renderer, config.renderer_options)
     body = create("body", config.body, config.body_options)

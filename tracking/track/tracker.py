@@ -69,6 +69,7 @@ from tracking.body.model import (
     forward_kinematics,
     root_rotation,
 )
+from tracking.body.motion import zxy_twin
 from tracking.rig.cameras import rig_up
 from tracking.silhouettes.hull import check_voxel_grid, surface_voxels, visual_hull
 from tracking.track.contour import ContourConfig, ContourRefiner, refine_shape
@@ -550,6 +551,19 @@ class SilhouetteTracker:
         steps = np.maximum(half / max(cfg.grid - 1, 1), np.deg2rad(3.0))
         values = _simplex(stage, best, steps, LOWER_LIMITS[params], UPPER_LIMITS[params],
                           cfg.init_simplex_evals if wide else cfg.simplex_evals)  # fmt: skip
+        if kind == "arm" and abs(values[0]) > np.pi / 2 and values[1] < -np.pi / 2:
+            # Raised past horizontal both sideways and forwards: the ZXY box also holds the
+            # twin of these angles, a lowered arm (z - 180, -180 - x) twisted by 180 degrees,
+            # which the twist limit clips. The two bend the elbow opposite ways, and a search
+            # started in one basin stays there (a run's arm tracked with the elbow bent
+            # backwards): the twin, its twist clipped into range, is refined as well.
+            twin = np.clip(np.r_[zxy_twin(values[:3]), values[3]], LOWER_LIMITS[params],
+                           UPPER_LIMITS[params])  # fmt: skip
+            twin = _simplex(stage, twin, np.maximum(steps, np.deg2rad(15.0)),
+                            LOWER_LIMITS[params], UPPER_LIMITS[params],
+                            cfg.init_simplex_evals if wide else 2 * cfg.simplex_evals)  # fmt: skip
+            if stage(twin) < stage(values):
+                values = twin
         self.evaluations += stage.evaluations
         return stage.params(values)
 

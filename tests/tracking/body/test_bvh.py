@@ -18,6 +18,7 @@ from tracking.body.bvh import (
     Motion,
     euler_to_rotations,
     forward_kinematics,
+    leading_reference_frames,
     local_rotations,
     motion_from_rotations,
     parse_bvh,
@@ -68,6 +69,19 @@ def random_rotations(rng: np.random.Generator, n: int) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- real clips
+
+
+@pytest.mark.shared_data
+@pytest.mark.parametrize(("name", "reference"), [
+    (WALK, 0), (START_WALK_STOP, 0), ("cmu_wave.bvh", 0),  # moving from frame 0
+    ("cmu_run.bvh", 1), ("cmu_squat.bvh", 1), ("cmu_boxing.bvh", 1),  # a T-pose in frame 0
+])  # fmt: skip
+def test_a_leading_t_pose_is_a_reference_frame(name: str, reference: int) -> None:
+    motion = read_bvh(cmu(name))
+    assert leading_reference_frames(motion) == reference
+    # Without its first frame no clip starts with a reference pose.
+    rest = dataclasses.replace(motion, channels=motion.channels[1:])
+    assert leading_reference_frames(rest) == 0
 
 
 @pytest.mark.shared_data

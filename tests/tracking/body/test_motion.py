@@ -10,7 +10,13 @@ import pytest
 
 from recon.errors import UserError
 from tests.helpers import shared_dataset
-from tracking.body.bvh import CMU_METRES_PER_UNIT, format_bvh, parse_bvh, read_bvh
+from tracking.body.bvh import (
+    CMU_METRES_PER_UNIT,
+    euler_to_rotations,
+    format_bvh,
+    parse_bvh,
+    read_bvh,
+)
 from tracking.body.model import (
     LIMIT_TOLERANCE_RAD,
     NODE_NAMES,
@@ -25,6 +31,7 @@ from tracking.body.motion import (
     motion_from_poses,
     poses_from_motion,
     read_pose_file,
+    zxy_twin,
 )
 from tracking.body.retarget import retarget
 
@@ -225,3 +232,16 @@ def test_pose_params_problem_names_the_first_bad_parameter():
     bad[PARAM_INDEX["root_tx"]] = 2000.0
     assert pose_params_problem(bad, joint_limits=False).startswith("root_tx = 2000 m")
     assert pose_params_problem(np.zeros(23)) == "23 pose parameters, not 24"
+
+
+def test_zxy_twin_is_the_same_rotation() -> None:
+    rng = np.random.default_rng(3)
+    zxy = rng.uniform(-np.pi, np.pi, (50, 3))
+    twin = zxy_twin(zxy)
+    assert np.all(np.abs(twin) <= np.pi)
+    assert not np.allclose(twin, zxy)
+    np.testing.assert_allclose(euler_to_rotations(np.degrees(twin), "ZXY"),
+                               euler_to_rotations(np.degrees(zxy), "ZXY"), atol=1e-12)
+    # The run's tracked left shoulder (raised and flexed past 90 degrees) is a lowered arm.
+    z, x, _ = zxy_twin(np.array([3.13, -2.53, 0.1]))
+    assert abs(z) < 0.05 and -0.7 < x < -0.5

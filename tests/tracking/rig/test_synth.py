@@ -410,3 +410,10 @@ def test_report_of_a_synthetic_sequence_reports_its_ground_truth_only_when_asked
     # The CMU walk moves at about 1.25 m/s along Z: the centre of mass follows.
     speed = (float(rows[-1]["z"]) - float(rows[0]["z"])) / (float(rows[-1]["time_s"]))
     assert 1.0 < abs(speed) < 1.5
+
+
+def test_clip_frames_from_a_first_frame():
+    frames, step = select_clip_frames(343, 120.0, step=4, fps=30.0, frames=None, first=1)
+    assert step == 4 and frames[0] == 1 and frames[-1] == 341 and len(frames) == 86
+    with pytest.raises(UserError, match="--first-frame 343"):
+        select_clip_frames(343, 120.0, step=4, fps=30.0, frames=None, first=343)
