@@ -12,6 +12,15 @@ search (rest pose on the principal axes, one orientation), to show what the sear
 
 Targets: mean joint position error <= 15 mm over >= 20 random poses; <= 10 s per fit on 2 cores.
 
+Real poses on a mismatched subject: frames spread over CMU clips (`REAL_CLIPS`, retargeted
+by `tracking.body.retarget`) at a random heading pose MakeHuman's body shaped as `MISMATCHED`
+(full mesh), and the same kind of cloud is sampled from it; the truth is that subject's own
+joints (`MpfbModel.joints`). Both ``--body superquadric`` and ``--body mpfb`` fit each cloud
+(`fit_body` defaults otherwise). Reported per pose and in summary: the mean joint error (16
+nodes, and the 11 joints without the end sites), the maximum, the success flag, the
+confident-wrong fits (success claimed with a mean or a maximum joint error above 50 mm), and
+the time per fit. Targets: mpfb mean <= 15 mm, no confident-wrong fit.
+
 Retargeting: every frame of the two CMU clips is retargeted (`tracking.body.retarget`) and the
 residual per joint (distance between our node and its CMU joint) reported in mm.
 """
@@ -24,7 +33,14 @@ from pathlib import Path
 
 import numpy as np
 
-from tracking.body.model import NODE_NAMES, BodyModel, BodyShape, Pose, node_positions_in_world
+from tracking.body.model import (
+    NODE_NAMES,
+    BodyModel,
+    BodyShape,
+    Pose,
+    node_positions_in_world,
+    pose_in_frame,
+)
 from tracking.body.synthetic import body_cloud, random_pose
 from tracking.fit.body_fit import (
     _H,
@@ -95,6 +111,87 @@ def fitting(poses: int, spread: float) -> None:
           f"{'PASS' if np.median(seconds) <= 10 else 'FAIL'} (median)")  # fmt: skip
 
 
+REAL_CLIPS: tuple[str, ...] = ("cmu_02_01_walk.bvh", "cmu_run.bvh", "cmu_wave.bvh",
+                               "cmu_bend_pickup.bvh")  # fmt: skip
+MISMATCHED = {"gender": 0.2, "weight": 0.7, "height": 0.4, "age_years": 40.0}
+"""`benchmarks/tracking_synthetic.py`'s mismatched subject (with 2 cm of clothing): a heavier,
+shorter, mostly female 40-year-old, not the fit's start (MakeHuman's average subject)."""
+CONFIDENT_WRONG_MM = 50.0
+
+
+def real_poses(frames_per_clip: int) -> list[tuple[str, int, Pose]]:
+    """(clip, frame, pose) of `frames_per_clip` frames evenly over each clip of `REAL_CLIPS`,
+    turned to a random heading about the vertical (seeded by the frame)."""
+    from tracking.body.bvh import CMU_METRES_PER_UNIT, read_bvh
+    from tracking.body.retarget import retarget
+
+    out = []
+    for clip in REAL_CLIPS:
+        motion = read_bvh(BVH / clip)
+        frames = np.linspace(0, motion.num_frames - 1, frames_per_clip + 2)[1:-1].astype(int)
+        result = retarget(motion, CMU_METRES_PER_UNIT, frames)
+        for frame, pose in zip(result.frames, result.poses, strict=True):
+            angle = np.random.default_rng(int(frame)).uniform(-np.pi, np.pi)
+            c, s = np.cos(angle), np.sin(angle)
+            turn = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+            out.append((clip, int(frame), pose_in_frame(pose, turn)))
+    return out
+
+
+def real_fitting(frames_per_clip: int) -> None:
+    from tracking.body.mpfb.model import MacroShape
+    from tracking.body.mpfb.subject import MpfbModel
+    from tracking.fit.body_fit import FitConfig
+
+    if not BVH.is_dir():
+        print(f"\nreal poses: skipped, {BVH} is absent")
+        return
+    subject = MpfbModel(MacroShape(**MISMATCHED), clothes_cm=2.0, mesh="full")
+    poses = real_poses(frames_per_clip)
+    bodies = ("superquadric", "mpfb")
+    print(f"\nreal poses on a mismatched mpfb subject ({subject.shape.height:.3f} m, "
+          f"{MISMATCHED}, 2 cm clothes, full mesh): {len(poses)} frames of "
+          f"{len(REAL_CLIPS)} clips, 5 mm noise, 30% hidden")  # fmt: skip
+    print(f"{'clip':>20} {'frame':>5} " + " ".join(
+        f"{b[:5] + ' mean':>10} {'j11':>5} {'max':>5} {'s':>5} {'ok':>3}" for b in bodies))
+    rows = {b: [] for b in bodies}  # (mean, joints11 mean, max, seconds, success)
+    for k, (clip, frame, pose) in enumerate(poses):
+        rng = np.random.default_rng(1000 + k)
+        points, _ = body_cloud(subject, pose, rng)
+        truth = subject.joints(pose)
+        line = f"{clip.removesuffix('.bvh'):>20} {frame:>5} "
+        for body in bodies:
+            start = time.perf_counter()
+            result = fit_body(points, FitConfig(body=body))
+            seconds = time.perf_counter() - start
+            joints = np.array([result.joints[n] for n in NODE_NAMES])
+            errors = 1000 * np.linalg.norm(joints - truth, axis=1)
+            rows[body].append((errors.mean(), errors[:11].mean(), errors.max(), seconds,
+                               result.success))  # fmt: skip
+            line += (f"{errors.mean():>10.1f} {errors[:11].mean():>5.1f} {errors.max():>5.0f} "
+                     f"{seconds:>5.1f} {'yes' if result.success else 'no':>3} ")  # fmt: skip
+        print(line, flush=True)
+    print()
+    for body in bodies:
+        a = np.array(rows[body])
+        wrong_mean = int(np.sum(a[:, 4].astype(bool) & (a[:, 0] > CONFIDENT_WRONG_MM)))
+        wrong_max = int(np.sum(a[:, 4].astype(bool) & (a[:, 2] > CONFIDENT_WRONG_MM)))
+        print(f"{body:>12}: mean joint error {a[:, 0].mean():.1f} mm (median "
+              f"{np.median(a[:, 0]):.1f}, worst pose {a[:, 0].max():.1f}; 11 joints "
+              f"{a[:, 1].mean():.1f}; mean of max {a[:, 2].mean():.0f}; over the accepted fits "
+              f"{a[a[:, 4] > 0, 0].mean() if a[:, 4].any() else np.nan:.1f}); success "
+              f"{int(a[:, 4].sum())}/{len(a)}; confident-wrong (success, error > "
+              f"{CONFIDENT_WRONG_MM:.0f} mm): {wrong_mean} by mean, {wrong_max} by max; time "
+              f"per fit median {np.median(a[:, 3]):.1f} s, max {a[:, 3].max():.1f} s")  # fmt: skip
+    seconds = {b: np.median(np.array(rows[b])[:, 3]) for b in bodies}
+    ratio = seconds["mpfb"] / seconds["superquadric"]
+    mean = np.array(rows["mpfb"])[:, 0].mean()
+    wrong = sum(1 for r in rows["mpfb"] if r[4] and r[2] > CONFIDENT_WRONG_MM)
+    print(f"time ratio mpfb/superquadric (medians): {ratio:.2f}")
+    print(f"target mpfb mean <= 15 mm: {'PASS' if mean <= 15 else 'FAIL'}; target no "
+          f"confident-wrong mpfb fit (by max): {'PASS' if wrong == 0 else 'FAIL'}")
+
+
 def retargeting() -> None:
     from tracking.body.bvh import CMU_METRES_PER_UNIT, read_bvh
     from tracking.body.retarget import cmu_node_positions, retarget
@@ -124,9 +221,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--poses", type=int, default=24)
     parser.add_argument("--spread", type=float, default=0.5)
+    parser.add_argument("--real-frames", type=int, default=6,
+                        help="frames per clip of the real-pose section (0: skip it)")
     parser.add_argument("--no-retarget", action="store_true")
     args = parser.parse_args()
-    fitting(args.poses, args.spread)
+    if args.poses:
+        fitting(args.poses, args.spread)
+    if args.real_frames:
+        real_fitting(args.real_frames)
     if not args.no_retarget:
         retargeting()
 

@@ -101,8 +101,10 @@ class TrackCommand:
         note = " (up to date)" if summary.get("up_to_date") else ""
         print(f"track      {summary['tracked']}/{summary['frames']} frames tracked{note}; median "
               f"XOR {summary['median_xor_fraction']:.1%} of the silhouette; "
-              f"{summary['seconds_per_frame']:.2f} s/frame; subject height "
-              f"{summary['height_m']:.2f} m")
+              f"{summary['seconds_per_frame']:.2f} s/frame"
+              + (f" ({summary['evaluations_per_second']:.0f} energy evaluations/s)"
+                 if "evaluations_per_second" in summary else "")  # older runs lack it
+              + f"; subject height {summary['height_m']:.2f} m")
         if summary["lost"]:
             print(f"lost       frames {summary['lost']}")
             print(f"warning: the subject was lost in {len(summary['lost'])} of "
@@ -119,7 +121,10 @@ class FitCommand:
     description = ("Estimate the body's height, girth and 24 pose parameters from a point "
                    "cloud: a workspace's dense cloud (mocap fit WS → WS/body/fit.json, fit.ply, "
                    "logs/fit.rrd) or any point cloud in metres (mocap fit --cloud FILE.ply --out "
-                   "DIR → DIR/fit.json, fit.ply, fit.rrd). Initialisation is automatic. A cloud "
+                   "DIR → DIR/fit.json, fit.ply, fit.rrd). Initialisation is automatic. With "
+                   "--body mpfb the superquadric fit is refined with MakeHuman's skinned body "
+                   "(pose, macro shape, clothing); fit.json then records that subject for "
+                   "mocap track --body mpfb --init-pose. A cloud "
                    "that no body explains is reported as a failure (exit code 2) with its "
                    "residual.")
 

@@ -12,9 +12,9 @@ from tracking.body.model import (
     LOWER_LIMITS,
     PARAM_INDEX,
     UPPER_LIMITS,
-    BodyModel,
     BodyShape,
     Pose,
+    TrackedModel,
 )
 
 
@@ -51,7 +51,7 @@ def sample_surface(
 
 
 def body_cloud(
-    model: BodyModel,
+    model: TrackedModel,
     pose: Pose,
     rng: np.random.Generator,
     count: int = 5000,
@@ -59,7 +59,9 @@ def body_cloud(
     hidden_fraction: float = 0.3,
     view_in_world: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """A point cloud of the posed body: points (N, 3) and their true normals (N, 3), metres.
+    """A point cloud of the posed body (any `TrackedModel`: the superquadrics, or e.g. the
+    skinned `tracking.body.mpfb.subject.MpfbModel`): points (N, 3) and their true normals
+    (N, 3), metres.
 
     The `hidden_fraction` of the surface that faces away from the viewing direction most is
     removed (a viewpoint on one side sees the front, not the back); then isotropic Gaussian noise

@@ -37,7 +37,9 @@ from __future__ import annotations
 
 import functools
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -55,6 +57,7 @@ from tracking.body.model import (
     BodyModel,
     BodyShape,
     Pose,
+    TrackedModel,
     forward_kinematics,
     pose_derivative_axes,
     segment_specs,
@@ -146,13 +149,28 @@ class FitConfig:
                   "acceptance test"},
     )  # fmt: skip
     seed: int = field(default=0, metadata={"help": "seed of the point subset"})
+    body: str = field(
+        default="superquadric",
+        metadata={"help": "body model plugin fitted (mocap plugins): superquadric (the "
+                  "thesis' rigid segments, height and girth) or mpfb (MakeHuman's skinned "
+                  "body: the superquadric fit, then its pose, macro shape and clothing "
+                  "refined on the skinned mesh)"},
+    )  # fmt: skip
+    body_rounds: int = field(
+        default=12,
+        metadata={"help": "ICP rounds of a skinned body's refinement (--body other than "
+                  "superquadric)"},
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)
 class FitResult:
-    """A fitted body. residual_median/rms: point-to-surface distances of the cloud's points to
-    the posed mesh (cloud units, metres for metric clouds); inlier_fraction: share of points
-    within `FitConfig.inlier_distance`; joints: node name -> (3,) position."""
+    """A fitted body. shape: its skeleton (`TrackedModel.shape`); residual_median/rms:
+    point-to-surface distances of the cloud's points to the posed mesh (cloud units, metres
+    for metric clouds); inlier_fraction: share of points within `FitConfig.inlier_distance`;
+    model: the fitted body model (`BodyModel` of the shape, or e.g. the reshaped
+    `tracking.body.mpfb.subject.MpfbModel`); joints: node name -> (3,) position, the model's
+    own (`TrackedModel.joints`)."""
 
     pose: Pose
     shape: BodyShape
@@ -164,11 +182,11 @@ class FitResult:
     points: int
     seconds: float
     candidates: int
+    model: TrackedModel
 
     @property
     def joints(self) -> dict[str, np.ndarray]:
-        world = forward_kinematics(self.pose, self.shape)
-        return {name: world[i, :3, 3].copy() for i, name in enumerate(NODE_NAMES)}
+        return dict(zip(NODE_NAMES, self.model.joints(self.pose), strict=True))
 
     def summary(self) -> dict[str, object]:
         return {
@@ -181,6 +199,7 @@ class FitResult:
             "points": self.points,
             "seconds": self.seconds,
             "candidates": self.candidates,
+            "body": self.model.record(),
         }
 
 
@@ -279,6 +298,54 @@ def _linearise(
     return points - posed, normal, jac
 
 
+def plane_distances2(e: np.ndarray, n: np.ndarray, tangent_weight: float) -> np.ndarray:
+    """(N,) squared distances of residuals e (N, 3) in the metric n n^T + t^2 (I - n n^T) of
+    the surface normals n (N, 3): point-to-plane plus a weak tangential pull t (which keeps
+    points from sliding along flat parts)."""
+    along = np.einsum("ni,ni->n", e, n)
+    t2 = tangent_weight**2
+    return t2 * np.einsum("ni,ni->n", e, e) + (1 - t2) * along**2
+
+
+def damped_steps(
+    x: np.ndarray, free: np.ndarray, bounds: tuple[np.ndarray, np.ndarray],
+    linearise: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]],
+    residuals: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], *, steps: int,
+    scale: float, loss: str = "soft_l1", tangent_weight: float = 0.3,
+) -> np.ndarray:  # fmt: skip
+    """`steps` Levenberg-Marquardt steps on the unknowns `free` of x for fixed matches, with
+    robust (IRLS) weights of `loss` at `scale`, projected onto `bounds` (of x[free]).
+
+    linearise(x): residuals e = point - model point (N, 3), normals (N, 3) and the Jacobian
+    d(model point)/dx[free] (N, 3, P); residuals(x): e and the normals only. A step is taken
+    when the robust cost of `plane_distances2` drops; the damping rises until it does.
+    """
+    rho, weight_of = _LOSSES[loss]
+    t2, s2 = tangent_weight**2, scale**2
+    lo, hi = bounds
+    damping = 1e-3
+    for _ in range(steps):
+        e, n, jac = linearise(x)
+        z = plane_distances2(e, n, tangent_weight) / s2
+        metric = t2 * np.eye(3) + (1 - t2) * n[:, :, None] * n[:, None]
+        mj = np.einsum("nij,njp->nip", weight_of(z)[:, None, None] * metric, jac)
+        hess = np.einsum("niq,nip->qp", jac, mj)
+        grad = np.einsum("nip,ni->p", mj, e)
+        current = float(np.sum(rho(z)))
+        for _ in range(6):  # Levenberg-Marquardt: raise the damping until the cost drops
+            a = hess + damping * np.diag(np.diag(hess) + 1e-9)
+            trial = x.copy()
+            trial[free] = np.clip(x[free] + np.linalg.solve(a, grad), lo, hi)
+            if float(np.sum(rho(plane_distances2(*residuals(trial), tangent_weight) / s2))) \
+                    < current:
+                x, damping = trial, max(damping / 3, 1e-7)
+                break
+            damping *= 10
+        else:
+            break
+    return x
+
+
 @dataclass(frozen=True)
 class _Problem:
     """What every ICP stage shares: the surface, the bounds, the robust scale."""
@@ -289,11 +356,8 @@ class _Problem:
     tangent_weight: float = 0.3
 
     def distances2(self, e: np.ndarray, n: np.ndarray) -> np.ndarray:
-        """Squared distances in the metric n n^T + t^2 (I - n n^T): point-to-plane plus a weak
-        tangential pull (which keeps points from sliding along flat parts)."""
-        along = np.einsum("ni,ni->n", e, n)
-        t2 = self.tangent_weight**2
-        return t2 * np.einsum("ni,ni->n", e, e) + (1 - t2) * along**2
+        """`plane_distances2` with this problem's tangential weight."""
+        return plane_distances2(e, n, self.tangent_weight)
 
     def icp(
         self, x: np.ndarray, points: np.ndarray, free: np.ndarray, rounds: int, steps: int,
@@ -302,34 +366,23 @@ class _Problem:
         """ICP on the unknowns `free` (indices into x): each round matches every point to the
         nearest surface sample (of `samples`, default all), then takes `steps` damped
         Gauss-Newton steps with robust (IRLS) weights, projected onto the bounds."""
-        rho, weight_of = _LOSSES[loss]
         samples = np.arange(len(self.surface.node)) if samples is None else samples
         x = x.copy()
         lo, hi = self.bounds[0][free], self.bounds[1][free]
         x[free] = np.clip(x[free], lo, hi)
-        t2, s2 = self.tangent_weight**2, self.scale**2
         for _ in range(rounds):
             match = _match(self.surface, x, points, samples)
-            damping, start = 1e-3, x[free].copy()
-            for _ in range(steps):
-                e, n, jac = _linearise(self.surface, x, points, match, free)
-                z = self.distances2(e, n) / s2
-                metric = t2 * np.eye(3) + (1 - t2) * n[:, :, None] * n[:, None]
-                mj = np.einsum("nij,njp->nip", weight_of(z)[:, None, None] * metric, jac)
-                hess = np.einsum("niq,nip->qp", jac, mj)
-                grad = np.einsum("nip,ni->p", mj, e)
-                current = float(np.sum(rho(z)))
-                for _ in range(6):  # Levenberg-Marquardt: raise the damping until cost drops
-                    a = hess + damping * np.diag(np.diag(hess) + 1e-9)
-                    trial = x.copy()
-                    trial[free] = np.clip(x[free] + np.linalg.solve(a, grad), lo, hi)
-                    posed, normal = self.surface.posed(trial, match)
-                    if float(np.sum(rho(self.distances2(points - posed, normal) / s2))) < current:
-                        x, damping = trial, max(damping / 3, 1e-7)
-                        break
-                    damping *= 10
-                else:
-                    break
+            start = x[free].copy()
+
+            def residuals(y: np.ndarray, match: np.ndarray = match):
+                posed, normal = self.surface.posed(y, match)
+                return points - posed, normal
+
+            def linearise(y: np.ndarray, match: np.ndarray = match):
+                return _linearise(self.surface, y, points, match, free)
+
+            x = damped_steps(x, free, (lo, hi), linearise, residuals, steps=steps,
+                             scale=self.scale, loss=loss, tangent_weight=self.tangent_weight)
             if np.abs(x[free] - start).max() < 1e-4:
                 break
         return x
@@ -338,12 +391,25 @@ class _Problem:
              keep_model: float = 0.6) -> float:  # fmt: skip
         """Mean Cauchy cost of cloud-to-surface distances plus half that of the surface-to-cloud
         distances of the `keep_model` nearest surface samples (the rest may be hidden)."""
-        rho = _LOSSES["cauchy"][0]
         posed, _ = self.surface.posed(x, slice(None) if samples is None else samples)
-        d_cloud = cKDTree(posed).query(points, k=1)[0]
-        d_model = np.sort(cKDTree(points).query(posed, k=1)[0])[: int(keep_model * len(posed))]
-        return float(rho((d_cloud / self.scale) ** 2).mean()
-                     + 0.5 * rho((d_model / self.scale) ** 2).mean())  # fmt: skip
+        return two_way_cost(posed, points, self.scale, keep_model)
+
+    @property
+    def n_samples(self) -> int:
+        """The number of surface samples (what `cost`'s `samples` index)."""
+        return len(self.surface.node)
+
+
+def two_way_cost(surface_points: np.ndarray, points: np.ndarray, scale: float,
+                 keep_model: float = 0.6) -> float:  # fmt: skip
+    """Mean Cauchy cost (at `scale`) of the distances from `points` (N, 3) to the nearest of
+    `surface_points` (M, 3), plus half that of the distances from the `keep_model` nearest
+    surface points to the cloud (the rest may be hidden from the sensor)."""
+    rho = _LOSSES["cauchy"][0]
+    d_cloud = cKDTree(surface_points).query(points, k=1)[0]
+    d_model = np.sort(cKDTree(points).query(surface_points, k=1)[0])
+    d_model = d_model[: int(keep_model * len(surface_points))]
+    return float(rho((d_cloud / scale) ** 2).mean() + 0.5 * rho((d_model / scale) ** 2).mean())
 
 
 def _orientation_candidates(points: np.ndarray, headings: int) -> tuple[list[np.ndarray], float]:
@@ -407,15 +473,17 @@ def _candidates(limb: str) -> tuple[tuple[float, ...], ...]:
     return _ARM_CANDIDATES if limb.endswith("arm") else _LEG_CANDIDATES
 
 
-def _search_limbs(problem: _Problem, x: np.ndarray, points: np.ndarray) -> np.ndarray:
+def search_limbs(problem: Any, x: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Each limb in turn: every candidate configuration is scored as it is, the best few are
     refined by ICP on the limb's own four parameters, and the lowest cost (the current
-    configuration included) is kept."""
+    configuration included) is kept. problem: `_Problem`, or any with its ``bounds``,
+    ``cost``, ``icp`` and ``n_samples`` (e.g. `tracking.fit.skinned_fit.SkinnedProblem`),
+    whose unknowns start with the 24 pose parameters."""
     lo, hi = problem.bounds
     for limb, idx in _LIMBS.items():
         trials = []
         # Pre-scoring on every 4th surface sample: 4x cheaper, the ranking barely changes.
-        sparse = np.arange(0, len(problem.surface.node), 4)
+        sparse = np.arange(0, problem.n_samples, 4)
         for candidate in _candidates(limb):
             y = x.copy()
             y[idx] = np.clip(_limb_values(limb, candidate), lo[idx], hi[idx])
@@ -451,7 +519,9 @@ def fit_body(points: np.ndarray, config: FitConfig | None = None,
     """Fit scale and pose to `points` (N, 3); see the module docstring for the method.
 
     up: (3,) the world's up direction when known (e.g. from a camera rig): only orientations
-    whose body axis lies within 60 degrees of it are tried.
+    whose body axis lies within 60 degrees of it are tried. With `FitConfig.body` other than
+    superquadric, the superquadric fit is the start of that model's refinement
+    (`tracking.fit.skinned_fit`), and the acceptance test is the refined model's.
     """
     config = config or FitConfig()
     start = time.perf_counter()
@@ -489,32 +559,57 @@ def fit_body(points: np.ndarray, config: FitConfig | None = None,
     # lowest cost. When the best so far fails the acceptance test, the next orientations are
     # tried, up to `max_orientations`.
     best: tuple[float, np.ndarray] | None = None
+    judged: dict[bytes, tuple] = {}
+
+    def judge(x: np.ndarray) -> tuple:
+        """`acceptance` of the fitted model from x (the superquadrics', or the refined
+        ``config.body``'s), with its pose and model; made once per x."""
+        if x.tobytes() not in judged:
+            if config.body == BodyModel.name:
+                judged[x.tobytes()] = _acceptance(x, points, config)
+            else:
+                from tracking.fit.skinned_fit import refine_skinned
+
+                pose = Pose(np.clip(x[:N_POSE_PARAMS], LOWER_LIMITS, UPPER_LIMITS))
+                model, pose = refine_skinned(config.body, float(x[_H]), pose, points, config)
+                ok, problems, residuals = acceptance(model, pose, points, config)
+                judged[x.tobytes()] = (ok, problems, (pose, model, *residuals))
+        return judged[x.tobytes()]
+
     everything = np.arange(N_POSE_PARAMS + 2)
     for tried, x in enumerate(_distinct(roots, config.max_orientations)):
-        if tried >= config.orientations and _acceptance(best[1], points, config)[0]:
+        if tried >= config.orientations and judge(best[1])[0]:
             break
-        x = _search_limbs(problem, x, coarse)
+        x = search_limbs(problem, x, coarse)
         x = problem.icp(x, coarse, everything, rounds=5, steps=3, loss="cauchy")
         # A second pass: a limb that lost its points to a misplaced neighbour finds them now.
-        x = _search_limbs(problem, x, coarse)
+        x = search_limbs(problem, x, coarse)
         x = problem.icp(x, points, everything, rounds=config.iterations, steps=3)
         candidates += 2 * sum(len(_candidates(limb)) for limb in _LIMBS)
         cost = problem.cost(x, points)
         if best is None or cost < best[0]:
             best = (cost, x)
     assert best is not None
-    ok, problems, (pose, shape, median, rms, inliers) = _acceptance(best[1], points, config)
+    ok, problems, (pose, model, median, rms, inliers) = judge(best[1])
     message = "; ".join(problems) if problems else "ok"
-    return FitResult(pose, shape, ok, message, median, rms, inliers, len(points),
-                     time.perf_counter() - start, candidates)  # fmt: skip
+    return FitResult(pose, model.shape, ok, message, median, rms, inliers, len(points),
+                     time.perf_counter() - start, candidates, model)  # fmt: skip
 
 
 def _acceptance(x: np.ndarray, points: np.ndarray, config: FitConfig):
-    """Whether the fit `x` passes the acceptance test, the reasons it does not, and its pose,
-    shape and exact mesh residuals (median, RMS, inlier fraction)."""
+    """`acceptance` of the superquadric fit `x`, and its pose and model."""
     pose = Pose(np.clip(x[:N_POSE_PARAMS], LOWER_LIMITS, UPPER_LIMITS))
-    shape = shape_from_scales(float(x[_H]), float(x[_G]))
-    distances = mesh_distances(BodyModel(shape), pose, points)
+    model = BodyModel(shape_from_scales(float(x[_H]), float(x[_G])))
+    ok, problems, residuals = acceptance(model, pose, points, config)
+    return ok, problems, (pose, model, *residuals)
+
+
+def acceptance(model: TrackedModel, pose: Pose, points: np.ndarray, config: FitConfig
+               ) -> tuple[bool, list[str], tuple[float, float, float]]:  # fmt: skip
+    """Whether `model` in `pose` passes the acceptance test on `points` (module docstring),
+    the reasons it does not, and its exact mesh residuals (median, RMS, inlier fraction)."""
+    shape = model.shape
+    distances = mesh_distances(model, pose, points)
     median, rms = float(np.median(distances)), float(np.sqrt(np.mean(distances**2)))
     inliers = float(np.mean(distances <= config.inlier_distance * shape.height))
     problems = []
@@ -525,18 +620,25 @@ def _acceptance(x: np.ndarray, points: np.ndarray, config: FitConfig):
         problems.append(f"only {inliers:.0%} of the points lie on the body")
     if config.metric and not 0.9 <= shape.height <= 2.3:
         problems.append(f"height {shape.height:.2f} m is not a human one")
-    return not problems, problems, (pose, shape, median, rms, inliers)
+    return not problems, problems, (median, rms, inliers)
 
 
-def mesh_distances(model: BodyModel, pose: Pose, points: np.ndarray) -> np.ndarray:
+def mesh_distances(model: TrackedModel, pose: Pose, points: np.ndarray) -> np.ndarray:
     """(N,) unsigned distance from each point to the posed triangle mesh (Open3D raycasting)."""
     import open3d as o3d
 
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(model.posed_vertices(pose).astype(np.float32)),
-        o3d.core.Tensor(np.asarray(model.faces, dtype=np.uint32)),
-    )
+    scene = triangle_scene(model.posed_vertices(pose), model.faces)
     query = o3d.core.Tensor(np.asarray(points, dtype=np.float32))
     return scene.compute_distance(query).numpy().astype(float)
+
+
+def triangle_scene(vertices: np.ndarray, faces: np.ndarray) -> Any:
+    """An Open3D raycasting scene of the triangle mesh (V, 3), (F, 3), for distance and
+    closest-point queries."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.asarray(vertices, dtype=np.float32)),
+                        o3d.core.Tensor(np.asarray(faces, dtype=np.uint32)))  # fmt: skip
+    return scene
 

@@ -1,16 +1,20 @@
 """`mocap fit`: the body model fitted to a point cloud file or to a workspace's dense cloud.
 
-Writes ``fit.json``, ``fit.ply`` (the posed body mesh) and a Rerun recording (cloud, body
-mesh, skeleton as keypoints with connections), each atomically. ``fit.json`` is a pose file
+Writes ``fit.json``, ``fit.ply`` (the posed body mesh: the superquadrics, or the fitted model's
+full-resolution mesh, e.g. mpfb's) and a Rerun recording (cloud, body mesh, skeleton as
+keypoints with connections), each atomically. ``fit.json`` is a pose file
 (`tracking.body.motion.read_pose_file`, the format of ``tracks/pose.json``; what `mocap track
 --init-pose` reads) of one frame without a frame rate, posed in the cloud's frame
 (``world_from_upright`` the identity), with the fit's own fields alongside::
 
     {"frames": [{"frame": 0, "params": [24 floats in POSE_LAYOUT order]}],
      "shape": {<every BodyShape field>: metres}, "world_from_upright": identity (3, 3),
+     "body": {"name": "superquadric" | "mpfb", ...} (the model's ``record()``: mpfb's "macro"
+             and "clothes_cm", what `mocap track --body mpfb --init-pose fit.json` rebuilds),
      "success", "message", "residual_median", "inlier_fraction", "height", ... (`FitResult`),
      "pose": {"<parameter name>": value, ...} (the same pose, by name),
-     "joints": {"<joint name>": [x, y, z], ...} (metres, the cloud's frame)}
+     "joints": {"<joint name>": [x, y, z], ...} (metres, the cloud's frame; the model's own
+                joints, `TrackedModel.joints`)}
 
 In a workspace these go to ``WS/body/`` and ``WS/logs/fit.rrd``, and the step is skipped when
 neither the cloud nor the settings changed.
@@ -27,7 +31,7 @@ import numpy as np
 
 from recon.errors import UserError
 from recon.workspace import Timer, Workspace, atomic_output, fingerprint, write_json_atomic
-from tracking.body.model import BONES, NODE_NAMES, BodyModel
+from tracking.body.model import BONES, NODE_NAMES
 from tracking.fit.body_fit import FitConfig, FitResult, check_cloud, fit_body
 
 
@@ -118,7 +122,7 @@ def write_fit(
     from recon import recording
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    model = BodyModel(result.shape)
+    model = result.model
     vertices = model.posed_vertices(result.pose)
     mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices),
                                      o3d.utility.Vector3iVector(model.faces.astype(np.int32)))
