@@ -143,7 +143,7 @@ class Camera:
         """Mean of fx and fy, in pixels."""
         return float(0.5 * (self.K[0, 0] + self.K[1, 1]))
 
-    @property
+    @cached_property
     def has_distortion(self) -> bool:
         return bool(np.any(self.dist != 0.0))
 
@@ -208,16 +208,18 @@ class Camera:
         points = np.asarray(points_in_world, dtype=np.float64).reshape(-1, 3)
         in_cam = points @ self.R.T + self.t
         depth = in_cam[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xy = in_cam[:, :2] / depth[:, None]
-        xy[depth <= 0] = np.nan
+        # NaN, not a division, where depth <= 0 (no errstate: it costs more than the rest for
+        # a few points, and the tracker projects a few points very often).
+        front = (depth > 0)[:, None]
+        xy = np.divide(in_cam[:, :2], depth[:, None], out=np.full((len(points), 2), np.nan),
+                       where=front)
         if self.has_distortion:
             xy = self.distort(xy)
         K = self.K
-        uv = np.stack([K[0, 0] * xy[:, 0] + K[0, 1] * xy[:, 1] + K[0, 2],
-                       K[1, 1] * xy[:, 1] + K[1, 2]], axis=1)
+        uv = np.empty((len(points), 2))
+        uv[:, 0] = K[0, 0] * xy[:, 0] + K[0, 1] * xy[:, 1] + K[0, 2]
+        uv[:, 1] = K[1, 1] * xy[:, 1] + K[1, 2]
         return uv, depth
-
     @cached_property
     def pixel_rays_in_camera(self) -> np.ndarray:
         """(H, W, 3) direction (x, y, 1) in the camera frame through each pixel centre.

@@ -1,5 +1,6 @@
-"""The compiled scanline kernel of the ``cpu-raster`` renderer
-(:func:`tracking.track.render.rasterize_triangles`).
+"""The compiled kernels of the ``cpu-raster`` renderer (:mod:`tracking.track.render`): the
+projection of the vertices (`project_vertices`, `Camera.project`'s arithmetic) and the scanline
+fill (`fill_triangles`), run together by `render_mask`.
 
 Apart from :mod:`tracking.track.render` so that loading the renderer plugins, as `mocap plugins`
 does, does not import numba; it is imported on the first render.
@@ -12,6 +13,42 @@ import numpy as np
 
 
 @numba.njit(cache=True, nogil=True)
+def project_vertices(vertices: np.ndarray, cam_from_world: np.ndarray, K: np.ndarray,
+                     dist: np.ndarray, near_m: float, max_radius2: float, uv: np.ndarray,
+                     ) -> None:  # fmt: skip
+    """uv[v]: the pixel of world vertex v (compiled `recon.cameras.Camera.project`, the same
+    operations in the same order), NaN where the renderer drops it: closer to the camera plane
+    than ``near_m`` (or behind it), or past the monotonic radius ``max_radius2`` of the
+    distortion (inf: none)."""
+    k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
+    distorted = k1 != 0.0 or k2 != 0.0 or p1 != 0.0 or p2 != 0.0 or k3 != 0.0
+    check_radius = np.isfinite(max_radius2)
+    r = cam_from_world
+    for v in range(vertices.shape[0]):
+        x, y, z = vertices[v, 0], vertices[v, 1], vertices[v, 2]
+        cx = r[0, 0] * x + r[0, 1] * y + r[0, 2] * z + r[0, 3]
+        cy = r[1, 0] * x + r[1, 1] * y + r[1, 2] * z + r[1, 3]
+        depth = r[2, 0] * x + r[2, 1] * y + r[2, 2] * z + r[2, 3]
+        if not depth >= near_m or depth <= 0.0:
+            uv[v, 0] = np.nan
+            uv[v, 1] = np.nan
+            continue
+        nx, ny = cx / depth, cy / depth
+        if check_radius and not (cx**2 + cy**2) / depth**2 < max_radius2:
+            uv[v, 0] = np.nan
+            uv[v, 1] = np.nan
+            continue
+        if distorted:
+            r2 = nx * nx + ny * ny
+            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            xd = nx * radial + 2.0 * p1 * nx * ny + p2 * (r2 + 2.0 * nx * nx)
+            yd = ny * radial + p1 * (r2 + 2.0 * ny * ny) + 2.0 * p2 * nx * ny
+            nx, ny = xd, yd
+        uv[v, 0] = K[0, 0] * nx + K[0, 1] * ny + K[0, 2]
+        uv[v, 1] = K[1, 1] * ny + K[1, 2]
+
+
+@numba.njit(cache=True, nogil=True)
 def fill_triangles(uv: np.ndarray, faces: np.ndarray, mask: np.ndarray, keep_winding: float
                    ) -> None:  # fmt: skip
     """Scanline fill (compiled): set every pixel of `mask` whose centre lies in a triangle.
@@ -20,24 +57,25 @@ def fill_triangles(uv: np.ndarray, faces: np.ndarray, mask: np.ndarray, keep_win
     height, width = mask.shape
     for f in range(faces.shape[0]):
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
-        xs = (uv[a, 0], uv[b, 0], uv[c, 0])
-        ys = (uv[a, 1], uv[b, 1], uv[c, 1])
-        if not (np.isfinite(xs[0]) and np.isfinite(xs[1]) and np.isfinite(xs[2])
-                and np.isfinite(ys[0]) and np.isfinite(ys[1]) and np.isfinite(ys[2])):
+        ax, ay, bx, by, cx, cy = uv[a, 0], uv[a, 1], uv[b, 0], uv[b, 1], uv[c, 0], uv[c, 1]
+        if not (np.isfinite(ax) and np.isfinite(bx) and np.isfinite(cx)
+                and np.isfinite(ay) and np.isfinite(by) and np.isfinite(cy)):
             continue
         if keep_winding != 0.0:
-            area = (xs[1] - xs[0]) * (ys[2] - ys[0]) - (xs[2] - xs[0]) * (ys[1] - ys[0])
+            area = (bx - ax) * (cy - ay) - (cx - ax) * (by - ay)
             if area * keep_winding < 0.0:
                 continue
-        # Sort by y: top (t), middle (m), bottom (b).
-        t, m, bo = 0, 1, 2
-        if ys[m] < ys[t]:
-            t, m = m, t
-        if ys[bo] < ys[m]:
-            m, bo = bo, m
-            if ys[m] < ys[t]:
-                t, m = m, t
-        tx, ty, mx, my, bx, by = xs[t], ys[t], xs[m], ys[m], xs[bo], ys[bo]
+        # Sort by y: top (t), middle (m), bottom (bo), ties kept in vertex order. Selects
+        # rather than swaps: the compiler makes them branch-free, and on a body's thousands of
+        # small triangles the swaps' branches were mispredicted about half the time.
+        swap = by < ay
+        tx, ty = (bx, by) if swap else (ax, ay)
+        mx, my = (ax, ay) if swap else (bx, by)
+        swap = cy < my
+        bx, by = (mx, my) if swap else (cx, cy)
+        mx, my = (cx, cy) if swap else (mx, my)
+        swap = my < ty
+        tx, ty, mx, my = (mx, my, tx, ty) if swap else (tx, ty, mx, my)
         y0 = max(np.ceil(ty - 0.5), 0.0)
         y1 = min(np.floor(by - 0.5), height - 1.0)
         if y1 < y0:
@@ -53,3 +91,13 @@ def fill_triangles(uv: np.ndarray, faces: np.ndarray, mask: np.ndarray, keep_win
             i1 = min(np.floor(max(x_long, x_short) - 0.5), width - 1.0)
             for col in range(int(i0), int(i1) + 1):
                 mask[row, col] = True
+
+
+@numba.njit(cache=True, nogil=True)
+def render_mask(vertices: np.ndarray, faces: np.ndarray, cam_from_world: np.ndarray,
+                K: np.ndarray, dist: np.ndarray, near_m: float, max_radius2: float,
+                keep_winding: float, mask: np.ndarray) -> None:  # fmt: skip
+    """`project_vertices` then `fill_triangles` into `mask`: one view of the renderer."""
+    uv = np.empty((vertices.shape[0], 2))
+    project_vertices(vertices, cam_from_world, K, dist, near_m, max_radius2, uv)
+    fill_triangles(uv, faces, mask, keep_winding)

@@ -9,9 +9,10 @@ distortion is honoured through :class:`~tracking.rig.cameras.Camera`.
 * ``cpu-raster`` (ours, the default: 1.7 ms per 640x480 view, 3-6x faster than the ray
   caster in ``benchmarks/renderers.py``, and pixel-identical to it on the body model): the
   silhouette of a closed mesh is the union of its projected triangles, so no depth buffer is
-  needed. Vertices go through ``Camera.project`` (distortion included; triangle edges stay
-  straight between distorted vertices: exact for a pinhole camera, far below a pixel for
-  small triangles) and a vectorised numpy scanline fill marks every covered pixel centre.
+  needed. Vertices are projected with ``Camera.project``'s arithmetic (distortion included;
+  triangle edges stay straight between distorted vertices: exact for a pinhole camera, far
+  below a pixel for small triangles) and a scanline fill marks every covered pixel centre,
+  both compiled by numba in one call per view (`tracking.track.raster`).
   Triangles with a vertex behind the near plane (``near_m``) are dropped, not clipped.
 * ``open3d-raycast``: Open3D's Embree ray caster on the CPU, one ray through every pixel
   centre (the undistorted ray, so distortion is exact). The reference of the agreement tests.
@@ -108,26 +109,38 @@ class CpuRasterRenderer(Plugin):
                                     "that close to a camera cannot be tracked anyway"})
 
     def render(self, vertices_in_world: Any, faces: Any, camera: Camera) -> np.ndarray:
+        return self.render_views(vertices_in_world, faces, [camera])[0]
+
+    def render_views(self, vertices_in_world: Any, faces: Any,
+                     cameras: Sequence[Camera]) -> list[np.ndarray]:  # fmt: skip
+        """`render` in every camera, the mesh checked once (what `render_views` calls)."""
+        from tracking.track.raster import render_mask
+
         vertices, tris = _check_mesh(vertices_in_world, faces)
-        uv, depth = camera.project(vertices)
-        bad = depth < self.options.near_m
-        if np.isfinite(camera.max_radius2):
-            # Past the monotonic radius the distortion polynomial folds back into the image.
-            in_cam = vertices @ camera.R.T + camera.t
-            with np.errstate(divide="ignore", invalid="ignore"):
-                r2 = (in_cam[:, 0] ** 2 + in_cam[:, 1] ** 2) / in_cam[:, 2] ** 2
-            bad |= ~(r2 < camera.max_radius2)
-        uv[bad] = np.nan  # the rasteriser skips triangles with a non-finite vertex
         # A counter-clockwise face (outward normal) in front of the camera is clockwise on
         # screen, where y points down: its signed area there is negative. The projection keeps
         # orientation (distortion too, inside its monotonic radius), so this is the 3-D test.
-        return rasterize_triangles(uv, tris, camera.width, camera.height,
-                                   keep_winding=-1 if self.options.cull_back_faces else 0)
+        winding = -1.0 if self.options.cull_back_faces else 0.0
+        vertices = np.ascontiguousarray(vertices)
+        masks = []
+        for camera in cameras:
+            mask = np.zeros((camera.height, camera.width), dtype=bool)
+            if len(tris):
+                # Vertices nearer than near_m, or past the monotonic radius (where the
+                # distortion polynomial folds back into the image), project to NaN, and the
+                # fill skips the triangles that have one.
+                render_mask(vertices, tris, camera.cam_from_world, camera.K, camera.dist,
+                            self.options.near_m, camera.max_radius2, winding, mask)
+            masks.append(mask)
+        return masks
 
 
 def render_views(renderer: Any, vertices_in_world: Any, faces: Any,
                  cameras: Sequence[Camera]) -> list[np.ndarray]:  # fmt: skip
-    """(H, W) bool silhouettes of one mesh in every camera (one `render` per camera)."""
+    """(H, W) bool silhouettes of one mesh in every camera: the renderer's own `render_views`
+    when it has one (``cpu-raster``: the mesh checked once), else one `render` per camera."""
+    if isinstance(renderer, CpuRasterRenderer):
+        return renderer.render_views(vertices_in_world, faces, cameras)
     return [np.asarray(renderer.render(vertices_in_world, faces, c), dtype=bool)
             for c in cameras]  # fmt: skip
 

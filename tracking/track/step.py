@@ -186,6 +186,9 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         "median_xor_fraction": float(np.median([r.xor_fraction for r in tracked])),
         "seconds_per_frame": timer.seconds / len(results),
         "evaluations_per_frame": float(np.mean([r.evaluations for r in results])),
+        # Energy evaluations per second of the frames' tracking (the shape pass's not counted).
+        "evaluations_per_second": float(sum(r.evaluations for r in results)
+                                        / max(sum(r.seconds for r in results), 1e-9)),
         "height_m": tracker.model.shape.height, "frame_rate": frame_rate,
         "body": tracker.model.record(),
     }

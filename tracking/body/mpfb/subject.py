@@ -194,8 +194,26 @@ class MpfbModel:
         return bind_vertices(self.assets, self.rest, self.vertex_indices)
 
     def posed_vertices(self, pose: Pose) -> np.ndarray:
-        """(V, 3) world vertices in ``pose``."""
-        return self.posed_body(pose).vertices_m
+        """(V, 3) world vertices in ``pose``: `posed_body`'s, with the rig's kinematics and
+        the skinning in compiled code and nothing else (the energy poses the body thousands of
+        times a frame)."""
+        from tracking.body.mpfb.skinning import blend_skin, skin_matrices
+
+        rotations, root = self._rotations(pose, None)
+        bones, weights, vertices = self._bound
+        skin = np.empty((self.assets.n_bones, 3, 4))
+        skin_matrices(np.ascontiguousarray(rotations, dtype=np.float64), self._bone_order[0],
+                      self._bone_order[1], self.rest.bone_heads_m,
+                      np.asarray(root, dtype=np.float64), skin)  # fmt: skip
+        posed = np.empty((len(vertices), 3))
+        blend_skin(skin, bones, weights, vertices, np.zeros((0, 3)), posed, np.zeros((0, 3)))
+        return posed
+
+    @cached_property
+    def _bone_order(self) -> tuple[np.ndarray, np.ndarray]:
+        """The rig's (B,) parent per bone and (B,) bones parents first, for `skin_matrices`."""
+        return (np.ascontiguousarray(self.assets.bone_parents, dtype=np.int64),
+                np.concatenate(self.assets.bone_levels).astype(np.int64))
 
     def posed_surface(self, pose: Pose) -> tuple[np.ndarray, np.ndarray]:
         """(V, 3) world vertices and (V, 3) unit outward normals in ``pose``."""
