@@ -187,6 +187,11 @@ class BodyModelPlugin(Protocol):
         object with the interface of ``tracking.body.model.TrackedModel``."""
         ...
 
+    def subject_record(self) -> dict[str, Any]:
+        """The pose file's ``body`` entry of the subject this plugin renders (``mocap synth``'s
+        gt/pose.json), which ``model_from_record`` reads: ``--init-pose gt/pose.json``."""
+        ...
+
     def model_from_record(self, record: Mapping[str, Any], skeleton: Any) -> Any:
         """The tracking model that a pose file describes: ``record`` its ``body`` entry (the
         model's ``record()``), ``skeleton`` its ``shape`` (a ``BodyShape``). ValueError when

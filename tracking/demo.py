@@ -6,9 +6,11 @@
 2. Self-calibration (`recon.calibration.compare.compare_intrinsics`, `mocap compare`): every
    focal initialiser on the same photos' features and matches, against the true cameras
    (``OUT/scene/truth.json``). In ``OUT/compare/``.
-3. Motion (`tracking.capture.capture`): a synthetic subject (`tracking.body.synthetic.
-   walking_poses`, 1.68 m, walking diagonally) filmed by a ring of cameras (`mocap synth
-   --videos --clean`: ``OUT/motion/synth/``, its truth in ``gt/`` and ``silhouettes/``), then
+3. Motion (`tracking.capture.capture`): mocap synth's default subject (MakeHuman's body,
+   shorter and heavier than the tracker's average start, in 2 cm of clothes) walking the
+   stride of a 1.68 m skeleton diagonally (`tracking.body.synthetic.walking_poses`), filmed
+   by a ring of cameras (`mocap synth --videos --clean`: ``OUT/motion/synth/``, its truth in
+   ``gt/`` and ``silhouettes/``), then
    captured from those videos and their calibration to a motion report
    (``OUT/motion/capture/``), scored against the truth: joint errors (MPJPE) and the IoU of
    the silhouettes with the exact renders (`tracking.rig.synth_video.capture_scores`).
@@ -39,7 +41,7 @@ if TYPE_CHECKING:
 
 MOTION_DIR = "motion"
 """``OUT/motion/``: the synthetic sequence (``synth/``) and its capture (``capture/``)."""
-_SUBJECT_HEIGHT_M = 1.68  # not the 1.75 m standard body the tracker starts from
+_SUBJECT_HEIGHT_M = 1.68  # the skeleton of the walk that drives the subject
 _FRAME_RATE = 30.0
 
 
@@ -152,7 +154,9 @@ def run_capture_demo(out: Path | str, config: MotionDemoConfig | None = None, *,
                      progress: bool = True) -> MotionDemo:  # fmt: skip
     """Part 3 of the demo in ``out`` (``OUT/motion/``): synthesise the walk and its videos,
     capture it, score it against the truth; also writes ``out/evaluation.json``."""
+    from plugins.registry import create
     from recon.workspace import write_json_atomic
+    from tracking.body.motion import read_pose_file
     from tracking.capture import capture
     from tracking.rig.synth import SynthConfig, synthesize
     from tracking.rig.synth_video import RENDER_DIR, capture_scores
@@ -169,9 +173,11 @@ def run_capture_demo(out: Path | str, config: MotionDemoConfig | None = None, *,
                      background_images=render / "backgrounds",
                      overwrite=overwrite or not synth.reused, progress=progress)
     scores = capture_scores(result.root, synth.root)
+    truth = read_pose_file(synth.root / "gt" / "pose.json")
+    subject = create("body", truth.body["name"]).model_from_record(truth.body, truth.shape)
     write_json_atomic(out / "evaluation.json", {
         "scores": scores.as_dict(), "config": dataclasses.asdict(config),
-        "subject_height_m": _SUBJECT_HEIGHT_M,
+        "subject_height_m": subject.shape.height,
         "tracked_height_m": result.track["height_m"],
         "median_xor_fraction": result.track["median_xor_fraction"]})
     return MotionDemo(synth, result, scores)

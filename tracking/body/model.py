@@ -650,6 +650,29 @@ class SkinnedMesh:
     joint_heads_m: np.ndarray
     weights: np.ndarray
 
+    def posed(self, rotations: np.ndarray, root_translation_m: np.ndarray) -> np.ndarray:
+        """(V, 3) the vertices for (B, 3, 3) local joint rotations and the (3,) root
+        displacement (``TrackedModel.skin_pose``), by the forward kinematics and linear blend
+        skinning of `tracking.body.gltf` (what a glTF viewer shows)."""
+        world = np.empty_like(rotations)
+        heads = np.empty_like(self.joint_heads_m)
+        for b, parent in enumerate(self.joint_parents):
+            if parent < 0:
+                world[b], heads[b] = rotations[b], self.joint_heads_m[b] + root_translation_m
+            else:
+                world[b] = world[parent] @ rotations[b]
+                heads[b] = heads[parent] + world[parent] @ (
+                    self.joint_heads_m[b] - self.joint_heads_m[parent])
+        # sum_b w_vb (W_b (v - head_b) + p_b), the bones with a weight only
+        used = np.flatnonzero(self.weights.any(axis=0))
+        out = np.zeros_like(self.vertices_m)
+        for b in used:
+            w = self.weights[:, b]
+            rows = np.flatnonzero(w)
+            out[rows] += w[rows, None] * (
+                (self.vertices_m[rows] - self.joint_heads_m[b]) @ world[b].T + heads[b])
+        return out
+
 
 @dataclass(frozen=True)
 class BodyModel:

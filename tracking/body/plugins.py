@@ -48,6 +48,10 @@ class SuperquadricBody(Plugin):
 
         return BodyModel(BodyShape.default(height_m))
 
+    def subject_record(self) -> dict[str, Any]:
+        """The rendered subject's pose-file entry: its shape is the pose file's skeleton."""
+        return {"name": "superquadric"}
+
     def model_from_record(self, record: dict[str, Any], skeleton: BodyShape) -> BodyModel:
         """The model of a pose file: its shape is the skeleton itself."""
         from tracking.body.model import BodyModel

@@ -82,6 +82,14 @@ _EDGE_MARGIN_PX = 3.0
 _MIN_RADIUS_M, _RADIUS_STEP_M, _MAX_RADIUS_M = 4.0, 0.25, 40.0
 
 
+SUBJECT_SHAPE: dict[str, float] = {"gender": 0.2, "weight": 0.7, "height": 0.4, "age_years": 40}
+"""The default synthetic subject of the mpfb body: a heavier, shorter, mostly female
+40-year-old, not MakeHuman's average (gender 0.5, 25 years, weight 0.5, height 0.5) from which
+`mocap track` starts, so that a benchmark never scores the tracker on its own start."""
+SUBJECT_CLOTHES_CM = 2.0
+"""... in loose clothing (the tracker's body starts unclothed)."""
+
+
 @dataclass(frozen=True, kw_only=True)
 class SynthConfig:
     """Settings of `mocap synth`. Field help is the CLI's help."""
@@ -116,9 +124,21 @@ class SynthConfig:
     fov_deg: float = field(default=50.0, metadata={"help": "horizontal field of view in degrees",
                                                    "flags": ("--fov",)})
     body: str = field(
-        default="superquadric",
+        default="mpfb",
         metadata={"help": "body model plugin that the pose drives (see `mocap plugins`): its "
                   "surface is rendered and its joints are the truth"})
+    shape: str | None = field(
+        default=None,
+        metadata={"help": "the mpfb subject's macro shape as KEY=VALUE,... of gender, age_years, "
+                  "muscle, weight, height and proportions (default: "
+                  + ",".join(f"{k}={v:g}" for k, v in SUBJECT_SHAPE.items())
+                  + ": not MakeHuman's average, where the tracker starts)",
+                  "metavar": "KEY=VALUE,..."})
+    clothes_cm: float | None = field(
+        default=None,
+        metadata={"help": "the mpfb subject's loose clothing in centimetres, 0..10 (default: "
+                  f"{SUBJECT_CLOTHES_CM:g}; the tracker starts unclothed)",
+                  "flags": ("--clothes",), "metavar": "CM"})
     body_options: tuple[str, ...] = field(
         default=(), metadata={"help": "an option of the body model as KEY=VALUE (repeatable)",
                               "flags": ("--body-option",), "metavar": "KEY=VALUE"})
@@ -211,6 +231,29 @@ def parse_size(text: str) -> tuple[int, int]:
     if not (16 <= width <= 16384 and 16 <= height <= 16384):
         raise UserError(f"--size {text}: width and height must be 16..16384 pixels")
     return width, height
+
+
+def body_options(config: SynthConfig) -> tuple[str, ...]:
+    """The body plugin's options: for mpfb, `SUBJECT_SHAPE` and `SUBJECT_CLOTHES_CM` unless
+    --shape and --clothes say otherwise, then --body-option; other bodies take
+    --body-option alone (--shape or --clothes for them is a UserError)."""
+    if config.body != "mpfb":
+        if config.shape is not None or config.clothes_cm is not None:
+            raise UserError(f"--shape and --clothes shape the mpfb body, not {config.body!r} "
+                            f"(use --body-option KEY=VALUE)")
+        return tuple(config.body_options)
+    shape: dict[str, object] = dict(SUBJECT_SHAPE)
+    if config.shape is not None:
+        shape = {}
+        for item in filter(None, (t.strip() for t in config.shape.split(","))):
+            key, sep, value = item.partition("=")
+            if not sep or not key.strip():
+                raise UserError(f"--shape {config.shape!r}: expected KEY=VALUE,... "
+                                f"(e.g. gender=0.2,weight=0.7)")
+            shape[key.strip()] = value.strip()
+    clothes = SUBJECT_CLOTHES_CM if config.clothes_cm is None else config.clothes_cm
+    return (*(f"{k}={v:g}" if isinstance(v, float | int) else f"{k}={v}"
+              for k, v in shape.items()), f"clothes_cm={clothes:g}", *config.body_options)
 
 
 def _check_config(config: SynthConfig) -> None:
@@ -456,7 +499,7 @@ def _config_record(config: SynthConfig) -> dict[str, Any]:
     record = dataclasses.asdict(config)
     record["bvh"] = str(config.bvh.resolve())
     record["renderer_options"] = list(config.renderer_options)
-    record["body_options"] = list(config.body_options)
+    record["body_options"] = list(body_options(config))
     return record
 
 
@@ -507,7 +550,7 @@ def synthesize(ws_root: Path | str, config: SynthConfig, *,
                                            fps=config.fps, frames=config.frames, first=first)
     frame_rate = motion.fps / step
     renderer = create("renderer", config.renderer, config.renderer_options)
-    body = create("body", config.body, config.body_options)
+    body = create("body", config.body, body_options(config))
     with Timer() as total:
         with Timer() as t_poses:
             poses, shape, residual_m, method = sequence_poses(motion, clip_frames, config)
@@ -564,7 +607,8 @@ def synthesize(ws_root: Path | str, config: SynthConfig, *,
                     log_silhouette(rec, f"world/cameras/{camera.name}/image", mask, int(k),
                                    float(times_s[k]))
             log_skeleton_frames(rec, "world/gt", frames, times_s, joints, BONES)
-            _write_truth(gt_dir, poses, shape, joints, clip_frames, frame_rate, config)
+            _write_truth(gt_dir, poses, shape, joints, clip_frames, frame_rate, config,
+                         body.subject_record())
             write_cameras_json(ws.cameras_path, cameras)
         if videos is None and render_dir.exists():  # videos of an earlier run's settings
             shutil.rmtree(render_dir)
@@ -594,8 +638,8 @@ def synthesize(ws_root: Path | str, config: SynthConfig, *,
 
 
 def _write_truth(gt_dir: Path, poses: list[Pose], shape: BodyShape, joints: np.ndarray,
-                 clip_frames: np.ndarray, frame_rate: float,
-                 config: SynthConfig) -> None:  # fmt: skip
+                 clip_frames: np.ndarray, frame_rate: float, config: SynthConfig,
+                 body_record: dict[str, Any]) -> None:  # fmt: skip
     """gt/joints.csv (micrometre precision) and gt/pose.json (exact floats)."""
     lines = ["frame,joint,x,y,z"]
     for k, frame_joints in enumerate(joints):
@@ -605,7 +649,7 @@ def _write_truth(gt_dir: Path, poses: list[Pose], shape: BodyShape, joints: np.n
     write_json_atomic(gt_dir / "pose.json", {
         "frame_rate": frame_rate,
         "shape": dataclasses.asdict(shape),
-        "body": {"name": config.body, "options": list(config.body_options)},
+        "body": {**body_record, "options": list(body_options(config))},
         "source": {"bvh": str(config.bvh.resolve()), "clip_frames": [int(f) for f in clip_frames]},
         "frames": [{"frame": k, "clip_frame": int(f), "params": [float(v) for v in p.params]}
                    for k, (f, p) in enumerate(zip(clip_frames, poses, strict=True))],

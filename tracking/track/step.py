@@ -14,6 +14,8 @@ or `mocap silhouettes`) and writes, each atomically:
 * ``tracks/subject.glb``: the subject's mesh (the body model's full resolution) skinned on
   its skeleton with the tracked motion, a glTF 2.0 binary that Blender and three.js play
   (`tracking.body.gltf`; lost frames held as in the BVH);
+* ``tracks/meshes/<frame:06d>.ply`` with ``--meshes``: that mesh posed in each tracked frame,
+  world frame, metres;
 * ``logs/track.rrd``: silhouettes and the XOR overlay per camera, the body mesh and skeleton,
   and the energy per frame, on the ``frame`` and ``time`` timelines.
 
@@ -58,6 +60,11 @@ class TrackStepConfig:
     )  # fmt: skip
     first: int = field(default=0, metadata={"help": "first frame to track"})
     last: int | None = field(default=None, metadata={"help": "last frame to track (inclusive)"})
+    meshes: bool = field(
+        default=False,
+        metadata={"help": "also write tracks/meshes/<frame:06d>.ply: the subject's full mesh "
+                  "in each tracked frame (world frame, metres, with normals)"},
+    )  # fmt: skip
 
 
 def frame_rate_of(ws: Workspace) -> float:
@@ -134,7 +141,8 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
     fp = fingerprint("track", settings, upstream)
     outputs = {"joints": ws.tracks_dir / "joints.csv", "pose": ws.tracks_dir / "pose.json",
                "bvh": ws.tracks_dir / "motion.bvh", "glb": ws.tracks_dir / "subject.glb",
-               "rrd": ws.logs_dir / "track.rrd"}
+               "rrd": ws.logs_dir / "track.rrd",
+               **({"meshes": ws.tracks_dir / "meshes"} if step.meshes else {})}
     if done := ws.reusable("track", fp, *outputs.values(), overwrite=overwrite):
         return {**done.summary, "up_to_date": True}
     frame_rate = frame_rate_of(ws)
@@ -282,6 +290,35 @@ def _write_outputs(outputs: dict[str, Path], results: list[FrameResult], model: 
     with atomic_output(outputs["bvh"]) as partial:
         write_bvh(motion_from_poses(held, model.shape, 1.0 / frame_rate), partial)
     write_subject_glb(outputs["glb"], model, held, frame_rate)
+    if "meshes" in outputs:
+        write_frame_meshes(outputs["meshes"], model, results, world_from_upright)
+
+
+def write_frame_meshes(folder: Path, model: TrackedModel, results: Sequence[FrameResult],
+                       world_from_upright: np.ndarray) -> None:  # fmt: skip
+    """``folder``/<frame:06d>.ply for every tracked frame: the full mesh (`TrackedModel.skin`)
+    posed in the world frame. Written into a sibling and renamed, replacing an older folder
+    whole (no mesh of a frame no longer tracked is left behind)."""
+    import shutil
+
+    import open3d as o3d
+
+    from recon.mesh.meshing import write_mesh
+
+    skin = model.skin()
+    partial = folder.with_name(folder.name + ".partial")
+    shutil.rmtree(partial, ignore_errors=True)
+    partial.mkdir(parents=True)
+    for r in results:
+        if r.pose is None:
+            continue
+        vertices = skin.posed(*model.skin_pose(r.pose)) @ world_from_upright.T
+        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices),
+                                         o3d.utility.Vector3iVector(skin.faces.astype(np.int32)))
+        mesh.compute_vertex_normals()
+        write_mesh(mesh, partial / f"{r.frame:06d}.ply", also=())
+    shutil.rmtree(folder, ignore_errors=True)
+    partial.rename(folder)
 
 
 def write_subject_glb(path: Path, model: TrackedModel, poses: Sequence[Pose],

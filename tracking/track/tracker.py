@@ -187,10 +187,10 @@ class TrackConfig:
         default="cpu-raster", metadata={"help": "silhouette renderer plugin (mocap plugins)"}
     )
     body: str = field(
-        default="superquadric",
-        metadata={"help": "body model plugin the tracker fits (mocap plugins): superquadric "
-                  "(the thesis' rigid segments) or mpfb (MakeHuman's skinned body, its macro "
-                  "shape and loose clothing refined from the silhouettes)"},
+        default="mpfb",
+        metadata={"help": "body model plugin the tracker fits (mocap plugins): mpfb "
+                  "(MakeHuman's skinned body, its macro shape and loose clothing refined from "
+                  "the silhouettes) or superquadric (the thesis' rigid segments)"},
     )  # fmt: skip
 
     def __post_init__(self) -> None:
@@ -329,9 +329,11 @@ class SilhouetteTracker:
         self.body = create("body", self.config.body)
         if shape is not None and model is not None:
             raise ValueError("give the tracker a shape or a model, not both")
+        if shape is not None:  # a known skeleton of the superquadric model
+            model = BodyModel(shape)
         if model is not None and model.name != self.config.body:
             raise ValueError(f"a {model.name} model for a tracker of body {self.config.body!r}")
-        self.model: TrackedModel | None = BodyModel(shape) if shape is not None else model
+        self.model: TrackedModel | None = model
         self.history: list[np.ndarray] = []  # params of the last tracked frames
         self._xor_floor = np.inf  # XOR fraction of the best initialisation (divergence test)
         # (the frame's energy, level, its outline refiner): built once per frame and level

@@ -16,12 +16,14 @@ from tracking.body.model import (
     NODE_NAMES,
     PARAM_INDEX,
     PARAM_MOVES_NODE,
+    BodyModel,
     BodyShape,
     Pose,
     forward_kinematics,
 )
 from tracking.body.mpfb.model import MacroShape
 from tracking.body.mpfb.subject import MpfbModel
+from tracking.body.synthetic import random_pose
 from tracking.track.contour import ContourConfig, _Posed, refine_shape
 from tracking.track.energy import SilhouetteEnergy
 
@@ -179,3 +181,19 @@ def test_the_subject_glb_plays_the_tracked_poses(tmp_path, body, start):
         if body == "mpfb":
             played = played[start.assets.decimated_vertex_indices]
         assert np.abs(played - expected).max() < 1e-4
+
+
+def test_the_output_skin_poses_like_the_model(start):
+    """`SkinnedMesh.posed` (the glTF's forward kinematics and skinning: what Blender shows and
+    what mocap track --meshes writes) driven by a model's `skin_pose` is that model's own
+    posing, at full resolution."""
+    rng = np.random.default_rng(5)
+    full = MpfbModel(start.macro, 2.0, "full")
+    decimated = MpfbModel(start.macro, 2.0)
+    superquadric = BodyModel(BodyShape.default(1.7))
+    for _ in range(3):
+        pose = random_pose(rng, 0.5)
+        np.testing.assert_allclose(decimated.skin().posed(*decimated.skin_pose(pose)),
+                                   full.posed_vertices(pose), atol=1e-9)
+        np.testing.assert_allclose(superquadric.skin().posed(*superquadric.skin_pose(pose)),
+                                   superquadric.posed_vertices(pose), atol=1e-9)

@@ -20,6 +20,7 @@ from tests.helpers import recording_entities, run_cli, shared_dataset
 from tracking.body.bvh import write_bvh
 from tracking.body.model import NODE_NAMES, BodyModel, BodyShape, Pose, node_positions_in_world
 from tracking.body.motion import motion_from_poses
+from tracking.body.mpfb.subject import MpfbModel
 from tracking.rig.cameras import read_cameras
 from tracking.rig.synth import (
     SynthConfig,
@@ -91,7 +92,7 @@ def body_bvh(tmp_path_factory) -> tuple[Path, list[Pose]]:
 def walk_clean(tmp_path_factory) -> Path:
     walk = shared_dataset("mocap_bvh") / "cmu_02_01_walk.bvh"
     root = tmp_path_factory.mktemp("walk") / "clean"
-    synthesize(root, SynthConfig(bvh=walk, frames=4, cameras=4, clean=True))
+    synthesize(root, SynthConfig(bvh=walk, body="superquadric", frames=4, cameras=4, clean=True))
     return root
 
 
@@ -99,7 +100,7 @@ def walk_clean(tmp_path_factory) -> Path:
 def walk_noisy(tmp_path_factory) -> Path:
     walk = shared_dataset("mocap_bvh") / "cmu_02_01_walk.bvh"
     root = tmp_path_factory.mktemp("walk") / "noisy"
-    synthesize(root, SynthConfig(bvh=walk, frames=4, cameras=4, step=40))
+    synthesize(root, SynthConfig(bvh=walk, body="superquadric", frames=4, cameras=4, step=40))
     return root
 
 
@@ -210,8 +211,8 @@ def test_cameras_ring_reads_back(walk_noisy):
 
 def test_body_bvh_poses_are_the_ground_truth(body_bvh, tmp_path):
     path, poses = body_bvh
-    result = synthesize(tmp_path / "ws", SynthConfig(bvh=path, cameras=2, size="320x240",
-                                                     clean=True))
+    result = synthesize(tmp_path / "ws", SynthConfig(bvh=path, body="superquadric", cameras=2,
+                                                     size="320x240", clean=True))
     shape, gt_poses, data = _gt(tmp_path / "ws")
     assert result.summary["frames"] == len(poses) == len(gt_poses)
     assert data["frame_rate"] == pytest.approx(30.0)
@@ -260,7 +261,8 @@ def test_videos_show_the_subject_over_the_empty_scene(body_bvh, tmp_path):
     subject's red over the camera's empty scene, which is also written as a photo."""
     path, _ = body_bvh
     ws = tmp_path / "ws"
-    config = SynthConfig(bvh=path, cameras=2, size="200x150", frames=3, clean=True, videos=True)
+    config = SynthConfig(bvh=path, body="superquadric", cameras=2, size="200x150", frames=3,
+                         clean=True, videos=True)
     result = synthesize(ws, config)
     assert any(line.startswith("videos      ") for line in result.lines())
     for camera in ("cam00", "cam01"):
@@ -417,3 +419,35 @@ def test_clip_frames_from_a_first_frame():
     assert step == 4 and frames[0] == 1 and frames[-1] == 341 and len(frames) == 86
     with pytest.raises(UserError, match="--first-frame 343"):
         select_clip_frames(343, 120.0, step=4, fps=30.0, frames=None, first=343)
+
+
+def test_the_default_subject_is_not_the_trackers_start(body_bvh, tmp_path):
+    """mocap synth's default body is mpfb with `SUBJECT_SHAPE` in `SUBJECT_CLOTHES_CM` of
+    clothes (the tracker starts at MakeHuman's average, unclothed); --shape and --clothes
+    change it, and are refused for another body."""
+    path, _ = body_bvh
+    common = ("--bvh", path, "--cameras", "2", "--size", "320x240", "--frames", "2", "--clean")
+    assert run_cli("synth", tmp_path / "default", *common).returncode == 0
+    _, _, data = _gt(tmp_path / "default")
+    assert data["body"]["options"] == [
+        "gender=0.2", "weight=0.7", "height=0.4", "age_years=40", "clothes_cm=2"]
+    # The subject as a pose file describes it: mocap track --init-pose gt/pose.json reads it.
+    subject = MpfbModel.from_record(data["body"])
+    assert (subject.macro.gender, subject.macro.weight, subject.clothes_cm) == (0.2, 0.7, 2.0)
+    assert run_cli("synth", tmp_path / "bare", *common, "--shape",
+                   "gender=0.2,weight=0.7,height=0.4,age_years=40", "--clothes", "0"
+                   ).returncode == 0  # fmt: skip
+    assert json.loads((tmp_path / "bare" / "gt" / "pose.json").read_text())["body"][
+        "options"][-1] == "clothes_cm=0"
+    # 2 cm of clothes on the trunk and legs: a larger silhouette in every view and frame.
+    for camera in ("cam00", "cam01"):
+        for frame in range(2):
+            clothed = _mask(tmp_path / "default", camera, frame)
+            bare = _mask(tmp_path / "bare", camera, frame)
+            assert np.count_nonzero(clothed) > 1.03 * np.count_nonzero(bare)
+    ws = tmp_path / "ws"
+    _assert_one_line_error(run_cli("synth", ws, *common, "--body", "superquadric", "--clothes",
+                                   "1"), "--shape and --clothes shape the mpfb body")
+    _assert_one_line_error(run_cli("synth", ws, *common, "--shape", "gender"), "--shape")
+    _assert_one_line_error(run_cli("synth", ws, *common, "--shape", "weight=3"), "weight")
+    assert not ws.exists() or not any(ws.iterdir())

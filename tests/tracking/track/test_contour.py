@@ -31,6 +31,9 @@ STRIDE = Pose.from_dict({
     "l_elbow_flex": 0.5, "r_elbow_flex": 0.9,
 })  # fmt: skip
 
+SUPERQUADRIC = TrackConfig(body="superquadric")
+"""The tracker of the superquadric model: these tests render and score that model."""
+
 
 def _masks(model: BodyModel, pose: Pose) -> list[np.ndarray]:
     vertices = model.posed_vertices(pose)
@@ -114,7 +117,8 @@ def test_automatic_start_picks_the_right_legs_and_the_shape():
                                np.where(np.arange(len(SHAPE_GROUPS)) == 0, 1.06, 1.0))
     model = BodyModel(truth_shape)
     sequence = [_masks(model, STRIDE)] * 2
-    tracker = SilhouetteTracker(CAMERAS, TrackConfig(shape_frames=2, shape_stride=1))
+    tracker = SilhouetteTracker(CAMERAS, TrackConfig(body="superquadric", shape_frames=2,
+                                                   shape_stride=1))
     first = tracker.calibrate_shape(sequence)
     assert tracker.shape is not None and tracker.history == []
     assert abs(tracker.shape.height / truth_shape.height - 1) < 0.03
@@ -130,7 +134,7 @@ def test_automatic_start_picks_the_right_legs_and_the_shape():
 def test_a_start_with_the_legs_swapped_is_put_right():
     shape = BodyShape.default(1.75)
     masks = _masks(BodyModel(shape), STRIDE)
-    tracker = SilhouetteTracker(CAMERAS, TrackConfig(), shape=shape)
+    tracker = SilhouetteTracker(CAMERAS, SUPERQUADRIC, shape=shape)
     swapped = swap_sides(STRIDE.params, "leg")
     assert _mpjpe_mm(Pose(swapped), shape, STRIDE, shape) > 60
     best = tracker._best_hypothesis(tracker._energy(masks), swapped)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 
 import numpy as np
@@ -29,6 +30,9 @@ SHAPE = BodyShape.default(1.75)
 MODEL = BodyModel(SHAPE)
 CAMERAS = ring_cameras(4, 4.0, 1.5, (0.0, 0.9, 0.0), 320, 240, 343.0)
 RENDER = CpuRasterRenderer(CpuRasterRenderer.Options())
+
+SUPERQUADRIC = TrackConfig(body="superquadric")
+"""The tracker of the superquadric model: these tests render and score that model."""
 
 
 def _walk(frames: int) -> list[Pose]:
@@ -62,7 +66,8 @@ def _mpjpe_mm(pose: Pose, shape: BodyShape, truth: Pose) -> float:
 @pytest.mark.parametrize("twist_weight", [TrackConfig().twist_weight, 0.0])
 def test_tracking_follows_a_walk_from_a_given_start(twist_weight):
     truth = _walk(4)
-    tracker = SilhouetteTracker(CAMERAS, TrackConfig(twist_weight=twist_weight), shape=SHAPE)
+    config = dataclasses.replace(SUPERQUADRIC, twist_weight=twist_weight)
+    tracker = SilhouetteTracker(CAMERAS, config, shape=SHAPE)
     errors = []
     for frame, pose in enumerate(truth):
         result = tracker.track(frame, _masks(pose), init=truth[0] if frame == 0 else None)
@@ -80,13 +85,13 @@ def test_refine_finds_the_pose_of_one_frame_from_a_wrong_start():
     start = Pose(truth.params + np.where(
         np.arange(len(truth.params)) == 0, 0.06, 0.0)).as_dict()
     start["r_shoulder_rx"] += np.deg2rad(35)
-    tracker = SilhouetteTracker(CAMERAS, shape=SHAPE)
+    tracker = SilhouetteTracker(CAMERAS, SUPERQUADRIC, shape=SHAPE)
     assert _mpjpe_mm(Pose.from_dict(start), SHAPE, truth) > 40
     assert _mpjpe_mm(tracker.refine(masks, Pose.from_dict(start)), SHAPE, truth) < 10
     assert _mpjpe_mm(tracker.refine(masks, truth, passes=1), SHAPE, truth) < 1
     # With the shape fitted to the frame too, from a subject 8% too tall: one frame takes
     # the height more than halfway back (measured: 1.80 m for 1.75 m).
-    tall = SilhouetteTracker(CAMERAS, shape=BodyShape.default(1.89))
+    tall = SilhouetteTracker(CAMERAS, SUPERQUADRIC, shape=BodyShape.default(1.89))
     refined = tall.refine(masks, truth, passes=1, shape=True)
     assert abs(tall.shape.height - SHAPE.height) < 0.5 * (1.89 - SHAPE.height)
     assert _mpjpe_mm(refined, tall.shape, truth) < 25
@@ -116,7 +121,8 @@ def test_upright_starts_stand_on_the_given_up_at_even_headings():
 
 def test_visual_hull_contains_the_body():
     pose = _walk(1)[0]
-    tracker = SilhouetteTracker(CAMERAS, TrackConfig(voxel_m=0.03), shape=SHAPE)
+    tracker = SilhouetteTracker(CAMERAS, dataclasses.replace(SUPERQUADRIC, voxel_m=0.03),
+                                shape=SHAPE)
     hull = tracker.visual_hull_points(_masks(pose))
     body = MODEL.posed_vertices(pose)
     # The hull encloses the body: its box covers the body's box to within a voxel or two.
@@ -131,7 +137,7 @@ def test_visual_hull_contains_the_body():
     (1, np.ones_like, "every pixel foreground in cam01"),
 ])
 def test_an_empty_or_full_silhouette_loses_the_frame_without_nan(view, fill, event):
-    tracker = SilhouetteTracker(CAMERAS, TrackConfig(), shape=SHAPE)
+    tracker = SilhouetteTracker(CAMERAS, SUPERQUADRIC, shape=SHAPE)
     masks = _masks(_walk(1)[0])
     masks[view] = fill(masks[view])
     result = tracker.track(7, masks)
@@ -142,7 +148,7 @@ def test_silhouettes_that_are_all_unknown_lose_the_frame():
     """Every silhouette pixel lies where the background is unknown (a median that holds the
     subject in every camera): nothing to fit, and the frame is lost, not divided by zero."""
     masks = _masks(_walk(1)[0])
-    tracker = SilhouetteTracker(CAMERAS, TrackConfig(), shape=SHAPE,
+    tracker = SilhouetteTracker(CAMERAS, SUPERQUADRIC, shape=SHAPE,
                                 unknown=[m.copy() for m in masks])
     result = tracker.track(7, masks)
     assert result.pose is None and "every silhouette pixel is unknown" in result.event
@@ -222,12 +228,23 @@ def test_cli_track_from_a_given_pose_in_another_frame(tmp_path):
         entry["params"] = pose_in_frame(Pose(entry["params"]), WORLD_FROM_YUP).params.tolist()
     given = tmp_path / "start.json"
     given.write_text(json.dumps(truth))  # no world_from_upright: the world frame
-    result = run_cli("track", ws, "--init-pose", given)
+    result = run_cli("track", ws, "--init-pose", given, "--meshes")
     assert result.returncode == 0, result.stderr
     tracked = json.loads((ws / "tracks" / "pose.json").read_text())
     assert np.allclose(tracked["world_from_upright"], WORLD_FROM_YUP, atol=1e-9)
     rows, errors = _joint_errors(ws)
     assert len(rows) == 2 * 16 and np.mean(errors) < 0.03
+    # --meshes: the full mesh of each frame in the rig's Z-up world, around its joints.
+    import open3d as o3d
+
+    assert sorted(p.name for p in (ws / "tracks" / "meshes").iterdir()) == [
+        "000000.ply", "000001.ply"]
+    mesh = o3d.io.read_triangle_mesh(str(ws / "tracks" / "meshes" / "000001.ply"))
+    vertices = np.asarray(mesh.vertices)
+    assert len(vertices) == 13380 and mesh.has_vertex_normals()
+    assert np.ptp(vertices[:, 2]) > 1.3 > np.ptp(vertices[:, 1])  # standing along Z
+    joints = np.array([[float(r[a]) for a in "xyz"] for r in rows if r["frame"] == "1"])
+    assert np.linalg.norm(vertices.mean(axis=0) - joints.mean(axis=0)) < 0.15
 
 
 def test_cli_track_needs_a_video_workspace(tmp_path):
@@ -261,7 +278,7 @@ def test_pixels_of_unknown_background_are_left_out():
 
     errors, xor = {}, {}
     for told in (True, False):
-        tracker = SilhouetteTracker(CAMERAS, TrackConfig(), shape=SHAPE,
+        tracker = SilhouetteTracker(CAMERAS, SUPERQUADRIC, shape=SHAPE,
                                     unknown=[None, band, None, None] if told else None)
         errors[told], xor[told] = [], []
         for frame, pose in enumerate(truth):
@@ -273,7 +290,7 @@ def test_pixels_of_unknown_background_are_left_out():
     assert max(errors[True]) < 15, errors
     assert max(xor[True]) < 0.06 < min(xor[False][1:]), xor
     # The visual hull is carved by what the views can tell: the torso is in it.
-    tracker = SilhouetteTracker(CAMERAS, TrackConfig(), shape=SHAPE,
+    tracker = SilhouetteTracker(CAMERAS, SUPERQUADRIC, shape=SHAPE,
                                 unknown=[None, band, None, None])
     hull = tracker.visual_hull_points(corrupted(truth[0]))
     body = MODEL.posed_vertices(truth[0])

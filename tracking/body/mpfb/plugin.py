@@ -74,6 +74,10 @@ class MpfbBody(Plugin):
 
         return MpfbModel.of_height(height_m)
 
+    def subject_record(self) -> dict[str, Any]:
+        """The rendered subject's macro shape and clothing (`MpfbModel.record`)."""
+        return self.model.record()
+
     def model_from_record(self, record: dict[str, Any], skeleton: BodyShape) -> Any:
         """The tracking model a pose file's ``body`` entry describes (ValueError if it does
         not); ``skeleton``, the file's shape, follows from it."""
