@@ -75,8 +75,10 @@ def _no_search(points: np.ndarray) -> dict:
     return node_positions_in_world(pose, shape_from_scales(x[_H], 1.0))
 
 
-def fitting(poses: int, spread: float) -> None:
-    print(f"fitting: {poses} random poses (spread {spread}), 5 mm noise, 30% hidden")
+def fitting(poses: int, spread: float, body: str | None = None) -> None:
+    config = FitConfig() if body is None else FitConfig(body=body)
+    print(f"fitting: {poses} random poses (spread {spread}) of the superquadric model, 5 mm "
+          f"noise, 30% hidden; fitted with --body {config.body}")  # fmt: skip
     print(f"{'pose':>4} {'height':>6} {'ours mm':>8} {'max mm':>7} {'no-search mm':>12} "
           f"{'s/fit':>6} result")  # fmt: skip
     ours, peer, seconds, ok, per_joint = [], [], [], [], []
@@ -88,7 +90,7 @@ def fitting(poses: int, spread: float) -> None:
         points, _ = body_cloud(BodyModel(shape), pose, rng)
         truth = node_positions_in_world(pose, shape)
         start = time.perf_counter()
-        result = fit_body(points)
+        result = fit_body(points, config)
         seconds.append(time.perf_counter() - start)
         errors = _errors_mm(result.joints, truth)
         per_joint.append(errors)
@@ -119,14 +121,20 @@ shorter, mostly female 40-year-old, not the fit's start (MakeHuman's average sub
 CONFIDENT_WRONG_MM = 50.0
 
 
-def real_poses(frames_per_clip: int) -> list[tuple[str, int, Pose]]:
-    """(clip, frame, pose) of `frames_per_clip` frames evenly over each clip of `REAL_CLIPS`,
-    turned to a random heading about the vertical (seeded by the frame)."""
+HELD_OUT_CLIPS: tuple[str, ...] = ("cmu_dance.bvh", "cmu_squat.bvh", "cmu_boxing.bvh",
+                                    "cmu_jump.bvh", "cmu_cartwheel.bvh")  # fmt: skip
+"""Clips the fit's constants were not chosen on (`--clips held-out`)."""
+
+
+def real_poses(frames_per_clip: int,
+               clips: tuple[str, ...] = REAL_CLIPS) -> list[tuple[str, int, Pose]]:  # fmt: skip
+    """(clip, frame, pose) of `frames_per_clip` frames evenly over each of `clips`, turned to
+    a random heading about the vertical (seeded by the frame)."""
     from tracking.body.bvh import CMU_METRES_PER_UNIT, read_bvh
     from tracking.body.retarget import retarget
 
     out = []
-    for clip in REAL_CLIPS:
+    for clip in clips:
         motion = read_bvh(BVH / clip)
         frames = np.linspace(0, motion.num_frames - 1, frames_per_clip + 2)[1:-1].astype(int)
         result = retarget(motion, CMU_METRES_PER_UNIT, frames)
@@ -138,7 +146,8 @@ def real_poses(frames_per_clip: int) -> list[tuple[str, int, Pose]]:
     return out
 
 
-def real_fitting(frames_per_clip: int) -> None:
+def real_fitting(frames_per_clip: int, clips: tuple[str, ...] = REAL_CLIPS,
+                 bodies: tuple[str, ...] = ("superquadric", "mpfb")) -> None:  # fmt: skip
     from tracking.body.mpfb.model import MacroShape
     from tracking.body.mpfb.subject import MpfbModel
     from tracking.fit.body_fit import FitConfig
@@ -147,13 +156,13 @@ def real_fitting(frames_per_clip: int) -> None:
         print(f"\nreal poses: skipped, {BVH} is absent")
         return
     subject = MpfbModel(MacroShape(**MISMATCHED), clothes_cm=2.0, mesh="full")
-    poses = real_poses(frames_per_clip)
-    bodies = ("superquadric", "mpfb")
+    poses = real_poses(frames_per_clip, clips)
     print(f"\nreal poses on a mismatched mpfb subject ({subject.shape.height:.3f} m, "
           f"{MISMATCHED}, 2 cm clothes, full mesh): {len(poses)} frames of "
-          f"{len(REAL_CLIPS)} clips, 5 mm noise, 30% hidden")  # fmt: skip
+          f"{len(clips)} clips, 5 mm noise, 30% hidden")  # fmt: skip
     print(f"{'clip':>20} {'frame':>5} " + " ".join(
-        f"{b[:5] + ' mean':>10} {'j11':>5} {'max':>5} {'s':>5} {'ok':>3}" for b in bodies))
+        f"{b[:5] + ' mean':>10} {'j11':>5} {'max':>5} {'inl':>4} {'s':>5} {'ok':>3}"
+        for b in bodies))
     rows = {b: [] for b in bodies}  # (mean, joints11 mean, max, seconds, success)
     for k, (clip, frame, pose) in enumerate(poses):
         rng = np.random.default_rng(1000 + k)
@@ -169,6 +178,7 @@ def real_fitting(frames_per_clip: int) -> None:
             rows[body].append((errors.mean(), errors[:11].mean(), errors.max(), seconds,
                                result.success))  # fmt: skip
             line += (f"{errors.mean():>10.1f} {errors[:11].mean():>5.1f} {errors.max():>5.0f} "
+                     f"{result.inlier_fraction:>4.0%} "
                      f"{seconds:>5.1f} {'yes' if result.success else 'no':>3} ")  # fmt: skip
         print(line, flush=True)
     print()
@@ -184,10 +194,13 @@ def real_fitting(frames_per_clip: int) -> None:
               f"{CONFIDENT_WRONG_MM:.0f} mm): {wrong_mean} by mean, {wrong_max} by max; time "
               f"per fit median {np.median(a[:, 3]):.1f} s, max {a[:, 3].max():.1f} s")  # fmt: skip
     seconds = {b: np.median(np.array(rows[b])[:, 3]) for b in bodies}
-    ratio = seconds["mpfb"] / seconds["superquadric"]
+    if "superquadric" in bodies and "mpfb" in bodies:
+        print(f"time ratio mpfb/superquadric (medians): "
+              f"{seconds['mpfb'] / seconds['superquadric']:.2f}")
+    if "mpfb" not in bodies:
+        return
     mean = np.array(rows["mpfb"])[:, 0].mean()
     wrong = sum(1 for r in rows["mpfb"] if r[4] and r[2] > CONFIDENT_WRONG_MM)
-    print(f"time ratio mpfb/superquadric (medians): {ratio:.2f}")
     print(f"target mpfb mean <= 15 mm: {'PASS' if mean <= 15 else 'FAIL'}; target no "
           f"confident-wrong mpfb fit (by max): {'PASS' if wrong == 0 else 'FAIL'}")
 
@@ -221,14 +234,25 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--poses", type=int, default=24)
     parser.add_argument("--spread", type=float, default=0.5)
+    parser.add_argument("--random-body", choices=("superquadric", "mpfb"),
+                        help="the body model fitted to the random poses' clouds (default: "
+                        "mocap fit's)")  # fmt: skip
     parser.add_argument("--real-frames", type=int, default=6,
                         help="frames per clip of the real-pose section (0: skip it)")
+    parser.add_argument("--clips", choices=("tuned", "held-out"), default="tuned",
+                        help="the real-pose section's clips: those the fit was developed on "
+                        "(walk, run, wave, bend and pick up), or others (dance, squat, "
+                        "boxing, jump, cartwheel)")  # fmt: skip
+    parser.add_argument("--bodies", nargs="+", choices=("superquadric", "mpfb"),
+                        default=["superquadric", "mpfb"],
+                        help="the body models of the real-pose section")  # fmt: skip
     parser.add_argument("--no-retarget", action="store_true")
     args = parser.parse_args()
     if args.poses:
-        fitting(args.poses, args.spread)
+        fitting(args.poses, args.spread, args.random_body)
     if args.real_frames:
-        real_fitting(args.real_frames)
+        real_fitting(args.real_frames, REAL_CLIPS if args.clips == "tuned" else HELD_OUT_CLIPS,
+                     tuple(args.bodies))  # fmt: skip
     if not args.no_retarget:
         retargeting()
 

@@ -61,7 +61,8 @@ def package_versions() -> dict[str, str]:
 
 STEP_VERSIONS: dict[str, int] = {
     "track": 2,  # poses in the rig's upright frame (pose.json's world_from_upright)
-    "fit": 2,  # fit.json is a pose file (frames, world_from_upright) that --init-pose reads
+    "fit": 3,  # 2: fit.json is a pose file (frames, world_from_upright) that --init-pose reads;
+    # 3: a limb fitted elsewhere fails the fit, and a skinned body fits clouds of unknown scale
 }
 """The version of each step's code (unlisted steps: 1). Bump a step's number when its outputs
 change for the same settings (a new format or method): its results in existing workspaces are

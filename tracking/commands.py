@@ -118,15 +118,16 @@ class TrackCommand:
 
 class FitCommand:
     help = "fit the articulated body model to a human point cloud"
-    description = ("Estimate the body's height, girth and 24 pose parameters from a point "
-                   "cloud: a workspace's dense cloud (mocap fit WS → WS/body/fit.json, fit.ply, "
+    description = ("Estimate the body's shape and 24 pose parameters from a point cloud: a "
+                   "workspace's dense cloud (mocap fit WS → WS/body/fit.json, fit.ply, "
                    "logs/fit.rrd) or any point cloud in metres (mocap fit --cloud FILE.ply --out "
-                   "DIR → DIR/fit.json, fit.ply, fit.rrd). Initialisation is automatic. With "
-                   "--body mpfb the superquadric fit is refined with MakeHuman's skinned body "
-                   "(pose, macro shape, clothing); fit.json then records that subject for "
-                   "mocap track --body mpfb --init-pose. A cloud "
-                   "that no body explains is reported as a failure (exit code 2) with its "
-                   "residual.")
+                   "DIR → DIR/fit.json, fit.ply, fit.rrd). Initialisation is automatic: the "
+                   "thesis' superquadric body is searched and fitted, then refined with "
+                   "MakeHuman's skinned body (pose, macro shape, clothing; --body superquadric "
+                   "stops at the first); fit.json records that subject for mocap track "
+                   "--init-pose. A cloud that no body explains, or a fit that leaves a limb's "
+                   "points unexplained or a limb where the cloud has none, is reported as a "
+                   "failure (exit code 2) with its reason.")
 
     def add_arguments(self, parser: argparse.ArgumentParser) -> None:
         from tracking.fit.body_fit import FitConfig

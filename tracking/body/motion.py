@@ -240,6 +240,10 @@ def read_pose_file(path: Path | str) -> PoseFile:
     if isinstance(data, dict) and data.get("success") is False:
         raise UserError(f"{path}: the body fit failed ({data.get('message', 'no message')}); "
                         "it holds no pose to use")
+    if isinstance(data, dict) and data.get("model_to_cloud", 1.0) != 1.0:
+        raise UserError(f"{path}: the body was fitted to a cloud of unknown scale (at "
+                        f"{data['model_to_cloud']:.4g} cloud units per metre), so its pose is not "
+                        "in the cloud's units; fit a metric cloud to start tracking from it")
     try:
         if not isinstance(data, dict):
             raise TypeError("not a JSON object")

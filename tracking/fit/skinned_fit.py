@@ -29,6 +29,7 @@ import numpy as np
 from tracking.body.model import LOWER_LIMITS, N_POSE_PARAMS, UPPER_LIMITS, Pose, TrackedModel
 from tracking.fit.body_fit import (
     FitConfig,
+    best_leg_pair,
     damped_steps,
     search_limbs,
     triangle_scene,
@@ -188,5 +189,8 @@ def refine_skinned(body: str, height_m: float, pose: Pose, points: np.ndarray,
     coarse = points[np.random.default_rng(config.seed).choice(
         len(points), min(400, len(points)), replace=False)]
     x = search_limbs(problem, x, coarse)
-    x = problem.icp(x, points, everything, rounds=config.body_rounds, steps=_STEPS_PER_ROUND)
+    challenger = best_leg_pair(problem, x, coarse)
+    fits = [problem.icp(y, points, everything, rounds=config.body_rounds, steps=_STEPS_PER_ROUND)
+            for y in (x, challenger)]  # fmt: skip
+    x = min(fits, key=lambda y: problem.cost(y, points))
     return problem.model(x), Pose(x[:N_POSE_PARAMS])

@@ -12,9 +12,14 @@ keypoints with connections), each atomically. ``fit.json`` is a pose file
      "body": {"name": "superquadric" | "mpfb", ...} (the model's ``record()``: mpfb's "macro"
              and "clothes_cm", what `mocap track --body mpfb --init-pose fit.json` rebuilds),
      "success", "message", "residual_median", "inlier_fraction", "height", ... (`FitResult`),
+     "model_to_cloud": cloud units per unit of "frames" and "shape" (1, but for a skinned
+                       body fitted to a cloud of unknown scale, a workspace's: it is fitted in
+                       metres at 1.75 m; `mocap track --init-pose` then refuses the file),
      "pose": {"<parameter name>": value, ...} (the same pose, by name),
-     "joints": {"<joint name>": [x, y, z], ...} (metres, the cloud's frame; the model's own
+     "joints": {"<joint name>": [x, y, z], ...} (the cloud's frame and units; the model's own
                 joints, `TrackedModel.joints`)}
+
+``fit.ply`` and the recording are in the cloud's units too.
 
 In a workspace these go to ``WS/body/`` and ``WS/logs/fit.rrd``, and the step is skipped when
 neither the cloud nor the settings changed.
@@ -123,7 +128,7 @@ def write_fit(
 
     out_dir.mkdir(parents=True, exist_ok=True)
     model = result.model
-    vertices = model.posed_vertices(result.pose)
+    vertices = result.vertices()
     mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices),
                                      o3d.utility.Vector3iVector(model.faces.astype(np.int32)))
     mesh.compute_vertex_normals()

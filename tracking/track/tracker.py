@@ -369,8 +369,12 @@ class SilhouetteTracker:
             if len(points) < 100:
                 raise TrackingLost("the silhouettes do not intersect in a visual hull")
             up = rig_up(self.cameras, points.mean(axis=0))
-            fit = fit_body(points, FitConfig(min_inlier_fraction=0.0, max_median_residual=1.0),
-                           up=up)
+            # The superquadrics' fit, whatever `mocap fit` defaults to: it is only a start, the
+            # silhouettes refine it (a skinned refinement of a hull is slow and no better).
+            fit = fit_body(points, FitConfig(body="superquadric", min_inlier_fraction=0.0,
+                                             max_median_residual=1.0,
+                                             max_unexplained_cluster=1.0,
+                                             min_limb_support=0.0), up=up)  # fmt: skip
             estimate_shape = self.shape is None
             if estimate_shape:
                 # A hull carved by few views is fatter than the body, and the fit grows the

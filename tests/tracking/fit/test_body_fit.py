@@ -1,4 +1,6 @@
-"""Body fitting to point clouds, against synthetic clouds sampled from known poses."""
+"""Body fitting to point clouds, against synthetic clouds sampled from known poses: the
+superquadric model's fit (``--body superquadric``), which is also the start of a skinned body's
+(tests/tracking/fit/test_mpfb_fit.py)."""
 
 from __future__ import annotations
 
@@ -16,6 +18,8 @@ from tracking.body.motion import read_pose_file
 from tracking.body.synthetic import body_cloud, random_pose
 from tracking.fit.body_fit import FitConfig, fit_body
 from tracking.fit.step import SubjectConfig, fit_workspace, isolate_subject
+
+SUPERQUADRIC = FitConfig(body="superquadric")
 
 
 def _scene(seed: int, height: float = 1.75):
@@ -37,7 +41,7 @@ def _mean_joint_error_m(joints, truth) -> float:
 
 def test_fit_recovers_pose_and_height_of_a_synthetic_cloud():
     points, truth = _scene(seed=4, height=1.9)
-    result = fit_body(points)
+    result = fit_body(points, SUPERQUADRIC)
     assert result.success, result.message
     assert _mean_joint_error_m(result.joints, truth) < 0.015  # the issue's 15 mm target
     assert result.shape.height == pytest.approx(1.9, rel=0.01)
@@ -52,7 +56,7 @@ def test_a_non_human_cloud_is_a_failure_not_a_confident_answer():
     rng = np.random.default_rng(0)
     sphere = rng.normal(size=(3000, 3))
     sphere = 0.5 * sphere / np.linalg.norm(sphere, axis=1, keepdims=True)
-    result = fit_body(sphere)
+    result = fit_body(sphere, SUPERQUADRIC)
     assert not result.success
     assert "lie on the body" in result.message or "median distance" in result.message
 
@@ -81,7 +85,7 @@ def test_cli_fit_writes_json_mesh_and_recording(tmp_path):
     points, truth = _scene(seed=3, height=1.7)
     cloud = tmp_path / "person.ply"
     _write_cloud(cloud, points)
-    result = run_cli("fit", "--cloud", cloud, "--out", tmp_path / "out")
+    result = run_cli("fit", "--cloud", cloud, "--out", tmp_path / "out", "--body", "superquadric")
     assert result.returncode == 0, result.stderr
     fit = json.loads((tmp_path / "out" / "fit.json").read_text())
     assert fit["success"] and set(fit["joints"]) == set(NODE_NAMES)
@@ -108,7 +112,8 @@ def test_cli_fit_reports_failure_with_exit_code_2(tmp_path):
     box = rng.uniform(-0.5, 0.5, size=(3000, 3))
     cloud = tmp_path / "box.ply"
     _write_cloud(cloud, box)
-    result = run_cli("fit", "--cloud", cloud, "--out", tmp_path / "out", "--max-orientations", "4")
+    result = run_cli("fit", "--cloud", cloud, "--out", tmp_path / "out", "--max-orientations", "4",
+                     "--body", "superquadric")  # fmt: skip
     assert result.returncode == 2
     assert result.stderr.strip().count("\n") == 0 and "does not look like" in result.stderr
     assert json.loads((tmp_path / "out" / "fit.json").read_text())["success"] is False
@@ -125,10 +130,10 @@ def test_fit_step_in_a_workspace_is_resumable(tmp_path):
     # A workspace cloud has no metric scale: the same body at 3x must still fit.
     _write_cloud(ws.dense_cloud_path, 3 * points)
     ws.record_step("dense", "test-cloud", outputs=[ws.dense_cloud_path], config={}, seconds=0.0)
-    summary, paths = fit_workspace(ws, SubjectConfig(), FitConfig())
+    summary, paths = fit_workspace(ws, SubjectConfig(), SUPERQUADRIC)
     assert summary["success"], summary["message"]
     assert summary["height"] == pytest.approx(3 * 1.75, rel=0.01)
     assert _mean_joint_error_m(summary["joints"], {k: 3 * v for k, v in truth.items()}) < 0.045
     stamp = paths["json"].stat().st_mtime_ns
-    again, _ = fit_workspace(ws, SubjectConfig(), FitConfig())
+    again, _ = fit_workspace(ws, SubjectConfig(), SUPERQUADRIC)
     assert paths["json"].stat().st_mtime_ns == stamp and again["joints"] == summary["joints"]
