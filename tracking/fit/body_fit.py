@@ -88,10 +88,9 @@ for _side in ("l", "r"):
 _TRUNK_NODES = [NODE_NAMES.index(n) for n in ("pelvis", "spine", "neck")]
 # Candidate limb configurations, degrees, in each limb's parameter order (rz, rx, ry, hinge);
 # rz is the left-side abduction, mirrored for the right. A grid over the ball joint's two swing
-# angles, with the hinge straight and bent; the arm swung back too (a CMU squat's forearm
-# behind the back was fitted into the trunk).
+# angles, with the hinge straight and bent.
 _ARM_CANDIDATES = tuple(
-    (abd, flex, 0, elbow) for abd in (0, 45, 90, 135) for flex in (45, 0, -45, -90)
+    (abd, flex, 0, elbow) for abd in (0, 45, 90, 135) for flex in (0, -45, -90)
     for elbow in (0, 90)
 )  # fmt: skip
 _LEG_CANDIDATES = tuple(
