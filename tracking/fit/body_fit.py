@@ -470,16 +470,16 @@ def _rotation_angle(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.arccos(np.clip((np.trace(a.T @ b) - 1) / 2, -1.0, 1.0)))
 
 
-def _root_up(x: np.ndarray) -> np.ndarray:
-    """(3,) the world direction of the pelvis' up (Y) axis in the unknowns x."""
-    return forward_kinematics(Pose(x[:N_POSE_PARAMS]), BodyShape.default(x[_H]))[0, :3, 1]
+def _root_rotation(x: np.ndarray) -> np.ndarray:
+    """(3, 3) world_from_pelvis rotation of the unknowns x (its column 1: the body's up)."""
+    return forward_kinematics(Pose(x[:N_POSE_PARAMS]), BodyShape.default(x[_H]))[0, :3, :3]
 
 
 def _distinct(fits: list[tuple[float, np.ndarray]], count: int) -> list[tuple[float, np.ndarray]]:
     """The `count` lowest-cost fits whose root orientations differ by more than 20 degrees."""
     kept: list[tuple[float, np.ndarray, np.ndarray]] = []
     for cost, x in sorted(fits, key=lambda item: item[0]):
-        rot = forward_kinematics(Pose(x[:N_POSE_PARAMS]), BodyShape.default(x[_H]))[0, :3, :3]
+        rot = _root_rotation(x)
         if all(_rotation_angle(rot, other) > np.deg2rad(20) for _, _, other in kept):
             kept.append((cost, x, rot))
         if len(kept) == count:
@@ -494,7 +494,7 @@ def _orientations(roots: list[tuple[float, np.ndarray]], count: int,
     turn (the lower cost first of each pair). The trunk alone can rank every upside-down root
     first: a CMU pose standing with one arm overhead had its 12 best roots head down, while
     its second-best upright one, limbs searched, fitted to 4 mm at a lower cost than any."""
-    ends = [_distinct([r for r in roots if sign * (_root_up(r[1]) @ axis) >= 0], count)
+    ends = [_distinct([r for r in roots if sign * (_root_rotation(r[1])[:, 1] @ axis) >= 0], count)
             for sign in (1.0, -1.0)]  # fmt: skip
     ordered = [r for pair in itertools.zip_longest(*ends)
                for r in sorted([r for r in pair if r is not None], key=lambda item: item[0])]
