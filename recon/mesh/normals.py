@@ -31,7 +31,10 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     triangles (what Open3D's ``compute_vertex_normals`` computes). Zero for a vertex on no
     triangle of non-zero area."""
     cross = _face_cross(vertices, faces)
-    summed = np.zeros(np.shape(vertices), dtype=np.result_type(cross, np.float64))
-    for k in range(3):
-        np.add.at(summed, faces[:, k], cross)
+    corners = np.asarray(faces).ravel()  # each face's three vertices, face by face
+    per_corner = np.repeat(cross, 3, axis=0)
+    n = len(vertices)
+    # bincount sums repeated indices like np.add.at, an order of magnitude faster.
+    summed = np.stack([np.bincount(corners, weights=per_corner[:, d], minlength=n)
+                       for d in range(3)], axis=1)  # fmt: skip
     return summed / np.maximum(np.linalg.norm(summed, axis=1), 1e-300)[:, None]

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from functools import cached_property
+from functools import cached_property, lru_cache
 from typing import ClassVar, Protocol
 
 import numpy as np
@@ -444,24 +444,37 @@ def pose_in_frame(pose: Pose, frame_from_world: np.ndarray) -> Pose:
 
 def parent_from_node_transforms(pose: Pose, shape: BodyShape) -> np.ndarray:
     """(16, 4, 4) local transforms; the root's is world_from_pelvis."""
-    per_param = axis_angle_rotations(_ROT_AXES, pose.params[_ROT_PARAMS])
-    local = np.tile(np.eye(4), (len(NODE_NAMES), 1, 1))
-    for node, rows in enumerate(_ROT_ROWS_OF_NODE):
-        for row in rows:  # layout order is the intrinsic application order (Z, X, Y)
-            local[node, :3, :3] = local[node, :3, :3] @ per_param[row]
-    local[:, :3, 3] = rest_offsets(shape)
-    local[0, :3, 3] += pose.params[_TRANS_PARAMS] @ _TRANS_AXES
-    return local
+    return _node_transforms(pose, shape)[0]
 
 
 def forward_kinematics(pose: Pose, shape: BodyShape) -> np.ndarray:
     """(16, 4, 4) world_from_node for every node of `NODE_NAMES` (joints then end sites)."""
-    local = parent_from_node_transforms(pose, shape)
-    world = np.empty_like(local)
-    # Depth of this tree is 5, so a loop over 16 nodes is cheaper than any batching trick.
-    for node, parent in enumerate(NODE_PARENTS):
-        world[node] = local[node] if parent < 0 else world[parent] @ local[node]
-    return world
+    return _node_transforms(pose, shape)[1]
+
+
+_ROT_NODE = np.array([NODE_INDEX[POSE_LAYOUT[i].joint] for i in _ROT_PARAMS])
+_NODE_PARENT_ARRAY = np.array(NODE_PARENTS)
+
+
+def _node_transforms(pose: Pose, shape: BodyShape) -> tuple[np.ndarray, np.ndarray]:
+    """(parent_from_node, world_from_node), each (16, 4, 4): the rotations of each node in
+    layout order (the intrinsic application order, Z X Y), its rest offset, the root's
+    translation; compiled (`tracking.body.kinematics`)."""
+    from tracking.body.kinematics import node_transforms
+
+    local, world = np.empty((2, len(NODE_NAMES), 4, 4))
+    node_transforms(np.ascontiguousarray(pose.params, dtype=np.float64), _ROT_PARAMS,
+                    _ROT_AXES, _ROT_NODE, _TRANS_PARAMS, _TRANS_AXES, _rest_offsets(shape),
+                    _NODE_PARENT_ARRAY, local, world)  # fmt: skip
+    return local, world
+
+
+@lru_cache(maxsize=64)
+def _rest_offsets(shape: BodyShape) -> np.ndarray:
+    """`rest_offsets`, made once per shape (shapes are frozen)."""
+    offsets = rest_offsets(shape)
+    offsets.flags.writeable = False
+    return offsets
 
 
 def _subtree_mask() -> np.ndarray:

@@ -139,10 +139,22 @@ class _Posed:
 
     def __init__(self, model: TrackedModel, x: np.ndarray, free: np.ndarray,
                  extra: np.ndarray | None = None) -> None:  # fmt: skip
-        _, self.axes, self.pivots = pose_derivative_axes(Pose(x), model.shape)
+        _, axes, pivots = pose_derivative_axes(Pose(x), model.shape)
         self.verts, self.normals = model.posed_surface(Pose(x))
-        self.moves = PARAM_MOVES_NODE[free].astype(float) @ model.node_weights.T  # (P, V)
-        self.free = free
+        self.node_weights = model.node_weights  # (V, 16)
+        self.free = np.asarray(free)
+        self.moved_nodes = PARAM_MOVES_NODE[self.free].astype(float)  # (P, 16)
+        # d v / d p_k = axis_k x v - axis_k x pivot_k for a rotation, axis_k for a
+        # translation: (P, 3, 3) cross-product matrices (0 for a translation) and (3, P)
+        # constant terms, so that the derivatives of many vertices are one product.
+        rotation = _ROTATION[self.free]
+        a = np.where(rotation[:, None], axes[self.free], 0.0)
+        skew = np.zeros((len(self.free), 3, 3))
+        skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -a[:, 2], a[:, 1], -a[:, 0]
+        self.skew = skew - skew.transpose(0, 2, 1)
+        self.constant = np.where(rotation[:, None], -np.einsum("kij,kj->ki", self.skew,
+                                                               pivots[self.free]),
+                                 axes[self.free]).T  # fmt: skip
         self.extra = extra  # (V, 3, E) or None
 
     @property
@@ -152,18 +164,12 @@ class _Posed:
     def derivatives(self, idx: np.ndarray) -> np.ndarray:
         """(n, 3, columns) derivatives of the vertices idx: extra columns first, then pose."""
         e = 0 if self.extra is None else self.extra.shape[2]
-        out = np.zeros((len(idx), 3, self.columns))
+        out = np.empty((len(idx), 3, self.columns))
         if e:
             out[:, :, :e] = self.extra[idx]
-        verts = self.verts[idx]
-        for col, k in enumerate(self.free):
-            weight = self.moves[col, idx]
-            on = weight > 0
-            if _ROTATION[k]:
-                out[on, :, e + col] = weight[on, None] * np.cross(self.axes[k],
-                                                                  verts[on] - self.pivots[k])
-            else:
-                out[on, :, e + col] = weight[on, None] * self.axes[k]
+        weight = self.node_weights[idx] @ self.moved_nodes.T  # (n, P)
+        out[:, :, e:] = (np.einsum("kij,nj->nik", self.skew, self.verts[idx])
+                         + self.constant) * weight[:, None, :]  # fmt: skip
         return out
 
 
@@ -200,11 +206,11 @@ def _outline_system(posed: _Posed, cameras: Sequence[Camera], targets: Sequence[
             idx = idx[target.known[row[idx].astype(int), col[idx].astype(int)]]
         if len(idx) == 0:
             continue
-        duv = np.einsum("nij,njk->nik", _projection_derivative(cam, posed.verts[idx]),
+        duv = np.matmul(_projection_derivative(cam, posed.verts[idx]),
                         posed.derivatives(idx))  # (n, 2, columns)  # fmt: skip
         # Model -> image: signed distance of each contour point to the image outline.
         sdf, grad = target.sample(uv[idx])
-        jac = np.einsum("ni,nik->nk", grad, duv)
+        jac = grad[:, 0, None] * duv[:, 0] + grad[:, 1, None] * duv[:, 1]
         weight = 1.0 / (1.0 + (sdf / scale) ** 2)
         a += (jac * weight[:, None]).T @ jac
         b += (jac * weight[:, None]).T @ sdf
@@ -213,9 +219,11 @@ def _outline_system(posed: _Posed, cameras: Sequence[Camera], targets: Sequence[
             dist, nearest = cKDTree(uv[idx]).query(target.outline)
             res = uv[idx][nearest] - target.outline
             weight = 1.0 / (1.0 + (dist / scale) ** 2)
-            jac2 = duv[nearest]
-            a += np.einsum("m,mik,mil->kl", weight, jac2, jac2)
-            b += np.einsum("m,mik,mi->k", weight, jac2, res)
+            # Both pixel coordinates of each outline point are rows of one system.
+            jac2 = duv[nearest].reshape(-1, n)
+            weighted = jac2 * np.repeat(weight, 2)[:, None]
+            a += weighted.T @ jac2
+            b += weighted.T @ res.ravel()
     return a, b
 
 

@@ -83,10 +83,17 @@ class Rig:
     def index(self, name: str) -> int:
         return self.names.index(name)
 
-    @property
+    @cached_property
+    def root(self) -> int:
+        """The index of the rig's root bone (the one without a parent)."""
+        return int(np.flatnonzero(np.asarray(self.parents) < 0)[0])
+
+    @cached_property
     def hip_centre(self) -> np.ndarray:
         """(3,) the midpoint of the hip joints (the thighs' heads): our pelvis node."""
-        return (self.heads[self.index("LeftUpLeg")] + self.heads[self.index("RightUpLeg")]) / 2
+        centre = (self.heads[self.index("LeftUpLeg")] + self.heads[self.index("RightUpLeg")]) / 2
+        centre.flags.writeable = False
+        return centre
 
     @property
     def hip_height_m(self) -> float:
@@ -138,21 +145,28 @@ def rig_rotations(rig: Rig, pose: Pose, skeleton: BodyShape,
                   corrections: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(rotations (B, 3, 3), root translation (3,)) of the rig for ``pose``, in the terms of
     `tracking.body.mpfb.model.posed_vertices`: each bone's ``parent_from_bone`` rotation (the
-    root's relative to the world), from the world rotations ``R_b = W_node(b) @ C_b`` (module
-    docstring), and the root's displacement from its rest position that puts the rig's hip
-    centre where our pelvis is. ``skeleton``: the shape the pose was retargeted to; its hip
-    height and the rig's set the vertical offset."""
-    corrections = limb_corrections(rig) if corrections is None else corrections
-    world_from_node = forward_kinematics(pose, skeleton)
-    node_rotation = world_from_node[:, :3, :3]
-    world = node_rotation[rig.node_of_bone] @ corrections
+    root's relative to the world), from `rig_world_rotations`."""
+    world, root = rig_world_rotations(rig, pose, skeleton, corrections)
     local = world.copy()
     has_parent = rig.parents >= 0
     local[has_parent] = np.einsum("bji,bjk->bik", world[rig.parents[has_parent]],
                                   world[has_parent])
+    return local, root
+
+
+def rig_world_rotations(rig: Rig, pose: Pose, skeleton: BodyShape,
+                        corrections: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(world rotations (B, 3, 3), root translation (3,)) of the rig's bones for ``pose``:
+    ``R_b = W_node(b) @ C_b`` (module docstring), and the root's displacement from its rest
+    position that puts the rig's hip centre where our pelvis is. ``skeleton``: the shape the
+    pose was retargeted to; its hip height and the rig's set the vertical offset."""
+    corrections = limb_corrections(rig) if corrections is None else corrections
+    world_from_node = forward_kinematics(pose, skeleton)
+    node_rotation = world_from_node[:, :3, :3]
+    world = node_rotation[rig.node_of_bone] @ corrections
     pelvis = world_from_node[NODE_INDEX["pelvis"], :3, 3].copy()
     pelvis[1] += rig.hip_height_m - skeleton.hip_height
-    root = int(np.flatnonzero(~has_parent)[0])
+    root = rig.root
     pelvis_rotation = node_rotation[NODE_INDEX["pelvis"]]
     root_head = pelvis + pelvis_rotation @ (rig.heads[root] - rig.hip_centre)
-    return local, root_head - rig.heads[root]
+    return world, root_head - rig.heads[root]

@@ -47,37 +47,29 @@ def blend_skin(skin: np.ndarray, bones: np.ndarray, weights: np.ndarray, vertice
 
 
 @numba.njit(cache=True, nogil=True)
-def skin_matrices(rotations: np.ndarray, parents: np.ndarray, order: np.ndarray,
+def skin_matrices(world: np.ndarray, parents: np.ndarray, order: np.ndarray,
                   rest_heads: np.ndarray, root_translation: np.ndarray, out_skin: np.ndarray,
                   ) -> None:  # fmt: skip
     """out_skin[b]: bone b's (3, 4) skinning matrix world_from_rest, ``x -> W_b (x - h_b) +
-    H_b``, for ``parent_from_bone`` `rotations` (B, 3, 3) about each bone's rest head h_b
-    (`rest_heads`, (B, 3)), the root's relative to the world, and the root's translation (3,)
-    from rest: the world rotations W_b and posed heads H_b of
-    `tracking.body.mpfb.model.forward_kinematics`, compiled. ``order``: every bone, parents
-    first (its root first); ``parents``: (B,) parent per bone, -1 for the root."""
-    world = np.empty((rotations.shape[0], 3, 3))
-    heads = np.empty((rotations.shape[0], 3))
+    H_b``, for the bones' world rotations W_b (``world``, (B, 3, 3)) about each bone's rest
+    head h_b (`rest_heads`, (B, 3)) and the root's translation (3,) from rest: the posed heads
+    H_b of `tracking.body.mpfb.model.forward_kinematics` (each child's head rides on its
+    parent's rotation), compiled. ``order``: every bone, parents first (its root first);
+    ``parents``: (B,) parent per bone, -1 for the root."""
+    heads = np.empty((world.shape[0], 3))
     for n in range(order.shape[0]):
         b = order[n]
         p = parents[b]
         if p < 0:
             for i in range(3):
                 heads[b, i] = rest_heads[b, i] + root_translation[i]
-                for j in range(3):
-                    world[b, i, j] = rotations[b, i, j]
             continue
         for i in range(3):
             offset = 0.0
             for k in range(3):
                 offset += world[p, i, k] * (rest_heads[b, k] - rest_heads[p, k])
             heads[b, i] = heads[p, i] + offset
-            for j in range(3):
-                s = 0.0
-                for k in range(3):
-                    s += world[p, i, k] * rotations[b, k, j]
-                world[b, i, j] = s
-    for b in range(rotations.shape[0]):
+    for b in range(world.shape[0]):
         for i in range(3):
             moved = 0.0
             for k in range(3):

@@ -50,7 +50,13 @@ from tracking.body.mpfb.model import (
     posed_vertices,
     rest_body,
 )
-from tracking.body.mpfb.retarget import NODE_OF_BONE, Rig, limb_corrections, rig_rotations
+from tracking.body.mpfb.retarget import (
+    NODE_OF_BONE,
+    Rig,
+    limb_corrections,
+    rig_rotations,
+    rig_world_rotations,
+)
 
 CLOTHED_BONES: tuple[str, ...] = (
     "Hips", "LHipJoint", "RHipJoint", "LowerBack", "Spine", "Spine1",
@@ -199,10 +205,10 @@ class MpfbModel:
         times a frame)."""
         from tracking.body.mpfb.skinning import blend_skin, skin_matrices
 
-        rotations, root = self._rotations(pose, None)
+        world, root = rig_world_rotations(self.rig, pose, self.shape, self.corrections)
         bones, weights, vertices = self._bound
         skin = np.empty((self.assets.n_bones, 3, 4))
-        skin_matrices(np.ascontiguousarray(rotations, dtype=np.float64), self._bone_order[0],
+        skin_matrices(np.ascontiguousarray(world, dtype=np.float64), self._bone_order[0],
                       self._bone_order[1], self.rest.bone_heads_m,
                       np.asarray(root, dtype=np.float64), skin)  # fmt: skip
         posed = np.empty((len(vertices), 3))
