@@ -5,6 +5,9 @@ SHELL := /bin/bash
 PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
+# Tests in two processes (pytest-xdist), a test file per process so that its module fixtures are
+# built once: 6:49 against 11:08 in one process on these 2-core machines (session 16).
+PYTEST_WORKERS ?= -n 2 --dist loadfile
 # Shared libraries Open3D loads at import (libusb), for rendering (GL, EGL, OpenMP), and for its
 # Filament renderer on the CPU (Vulkan loader + Mesa's lavapipe).
 APT_PACKAGES := libusb-1.0-0 libgl1 libegl1 libgomp1 libvulkan1 mesa-vulkan-drivers
@@ -16,11 +19,11 @@ demo: install
 
 test: install
 	@$(VENV)/bin/rerun analytics disable >/dev/null 2>&1 || true
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q $(PYTEST_WORKERS)
 
 test-all: install
 	@$(VENV)/bin/rerun analytics disable >/dev/null 2>&1 || true
-	$(PY) -m pytest -q -m ''
+	$(PY) -m pytest -q -m '' $(PYTEST_WORKERS)
 
 bench: install
 	$(PY) benchmarks/sfm_overhead.py

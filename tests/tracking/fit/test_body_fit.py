@@ -112,8 +112,8 @@ def test_cli_fit_reports_failure_with_exit_code_2(tmp_path):
     box = rng.uniform(-0.5, 0.5, size=(3000, 3))
     cloud = tmp_path / "box.ply"
     _write_cloud(cloud, box)
-    result = run_cli("fit", "--cloud", cloud, "--out", tmp_path / "out", "--max-orientations", "4",
-                     "--body", "superquadric")  # fmt: skip
+    result = run_cli("fit", "--cloud", cloud, "--out", tmp_path / "out", "--orientations", "2",
+                     "--max-orientations", "2", "--body", "superquadric")  # fmt: skip
     assert result.returncode == 2
     assert result.stderr.strip().count("\n") == 0 and "does not look like" in result.stderr
     assert json.loads((tmp_path / "out" / "fit.json").read_text())["success"] is False

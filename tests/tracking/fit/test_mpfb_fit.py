@@ -76,9 +76,10 @@ def test_cli_mpfb_fit_of_a_box_fails_and_still_writes_the_body(tmp_path):
     cloud = tmp_path / "box.ply"
     o3d.io.write_point_cloud(str(cloud), o3d.geometry.PointCloud(o3d.utility.Vector3dVector(box)))
     out = tmp_path / "fit"
-    # Two orientations, both judged (the search's depth is not what this test is about).
+    # One orientation, judged (the search's depth is not what this test is about).
     done = run_cli("fit", "--cloud", cloud, "--out", out, "--body", "mpfb", "--no-isolate",
-                   "--orientations", "2", "--max-orientations", "2")  # fmt: skip
+                   "--orientations", "1", "--max-orientations", "1",
+                   "--judged", "1")  # fmt: skip
     assert done.returncode == 2, done.stderr
     assert "does not look like one human body" in done.stderr
     data = json.loads((out / "fit.json").read_text())
