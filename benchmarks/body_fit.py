@@ -154,6 +154,15 @@ def real_poses(frames_per_clip: int,
     return out
 
 
+FITTERS: dict[str, dict] = {
+    "superquadric": {"body": "superquadric"},
+    "mpfb": {"body": "mpfb"},
+    "mpfb-24": {"body": "mpfb", "hold": ("spine_bend", "spine_twist")},
+}
+"""`FitConfig` settings of each fitter of the real poses: the two body models with their
+defaults, and mpfb without the spine's side bend and twist (the thesis' 24 parameters)."""
+
+
 def real_fitting(frames_per_clip: int, clips: tuple[str, ...] = REAL_CLIPS,
                  bodies: tuple[str, ...] = ("superquadric", "mpfb")) -> None:  # fmt: skip
     from tracking.body.mpfb.model import MacroShape
@@ -180,7 +189,7 @@ def real_fitting(frames_per_clip: int, clips: tuple[str, ...] = REAL_CLIPS,
         messages = {}
         for body in bodies:
             start = time.perf_counter()
-            result = fit_body(points, FitConfig(body=body))
+            result = fit_body(points, FitConfig(**FITTERS[body]))
             seconds = time.perf_counter() - start
             joints = np.array([result.joints[n] for n in NODE_NAMES])
             errors = 1000 * np.linalg.norm(joints - truth, axis=1)
@@ -257,9 +266,10 @@ def main() -> None:
                         "(walk, run, wave, bend and pick up), held out until session 16 "
                         "(dance, squat, boxing, jump, cartwheel), or never looked at (arms "
                         "overhead, pirouette, start-walk-stop)")  # fmt: skip
-    parser.add_argument("--bodies", nargs="+", choices=("superquadric", "mpfb"),
+    parser.add_argument("--bodies", nargs="+", choices=tuple(FITTERS),
                         default=["superquadric", "mpfb"],
-                        help="the body models of the real-pose section")  # fmt: skip
+                        help="the fitters of the real-pose section (mpfb-24: mpfb without "
+                        "the spine's side bend and twist)")  # fmt: skip
     parser.add_argument("--no-retarget", action="store_true")
     args = parser.parse_args()
     if args.poses:

@@ -1,18 +1,19 @@
 """Silhouette tracking on real video: the Pose2Sim demo (issue 6), one run.
 
-    .venv/bin/python benchmarks/tracking_pose2sim.py [--keep DIR] [--last N]
+    .venv/bin/python benchmarks/tracking_pose2sim.py [--keep DIR] [--last N] [--trackers ...]
 
-For each body model (`BODIES`: the thesis' superquadrics and MakeHuman's skinned body, issue
-19), `mocap init-video` (Calib.qca.txt), `mocap silhouettes` (the demo has no empty frame: temporal
-median background, completed by the extrinsic calibration shots, which show the lab without the
-subject but with people and objects the videos do not, where the subject moved: ``--plates
-cluttered``; the multi-view check) and `mocap track` with their defaults but ``--body``,
-then the silhouette IoU between the tracked model and the image silhouettes, per camera per
-frame, over the pixels whose label the silhouettes can tell (CDnet leaves its "unknown" pixels
-out of its scores likewise: `silhouettes/<camera>/unknown.png`, where the photo shows something
-the video never does and the subject covers the median; the IoU over all pixels is printed
+For each tracker (`TRACKERS`: the thesis' superquadrics, MakeHuman's skinned body of issue 19,
+and that body without the spine's side bend and twist), `mocap init-video` (Calib.qca.txt),
+`mocap silhouettes` (the demo has no empty frame: temporal median background, completed by the
+extrinsic calibration shots, which show the lab without the subject but with people and
+objects the videos do not, where the subject moved: ``--plates cluttered``; the multi-view
+check) and `mocap track` with their defaults but ``--body`` (and ``--hold``), then the
+silhouette IoU between the tracked model and the image silhouettes, per camera per frame, over
+the pixels whose label the silhouettes can tell (CDnet leaves its "unknown" pixels out of its
+scores likewise: `silhouettes/<camera>/unknown.png`, where the photo shows something the video
+never does and the subject covers the median; the IoU over all pixels is printed
 too), and a picture of the overlay (model red, image blue, both grey, unknown pixels dimmed)
-for a few frames: benchmarks/out/tracking_pose2sim.png.
+for a few frames: benchmarks/out/tracking_pose2sim_<tracker>.png.
 
 What the silhouettes allow, measured in the same run: on every 20th frame, the IoU of each
 view's silhouette with the silhouette of the exact visual hull of all four views
@@ -46,8 +47,14 @@ from _cli import mocap  # benchmarks/ is on sys.path when a script here runs
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT.parent / "shared" / "data" / "pose2sim_demo"
 OUT = ROOT / "benchmarks" / "out"
-BODIES = ("superquadric", "mpfb")
-"""The body models tracked and scored, in that order, in one run."""
+TRACKERS: dict[str, tuple[str, tuple[str, ...]]] = {
+    "superquadric": ("superquadric", ()),
+    "mpfb": ("mpfb", ()),
+    "mpfb-24": ("mpfb", ("spine_bend", "spine_twist")),
+}
+"""The trackers run and scored, in that order, in one run: (body model, parameters held at 0,
+``--hold``). mpfb-24 is mpfb without the spine's side bend and twist (the thesis' 24
+parameters): whether those two pay."""
 
 
 def main() -> None:
@@ -64,8 +71,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--keep", type=Path, help="keep the workspace in this folder")
     parser.add_argument("--last", type=int, help="track frames 0..LAST only")
-    parser.add_argument("--bodies", nargs="+", default=list(BODIES), choices=BODIES,
-                        help="body models to track and score (default: both)")
+    parser.add_argument("--trackers", nargs="+", default=list(TRACKERS), choices=TRACKERS,
+                        help="trackers to run and score (default: all)")
     args = parser.parse_args()
     if not DEMO.is_dir():
         sys.exit(f"{DEMO} is absent")
@@ -79,9 +86,11 @@ def main() -> None:
                       str(DEMO / "calibration" / "extrinsics"), "--plates", "cluttered")
         extra = ["--last", str(args.last)] if args.last is not None else []
         medians: dict[str, float] = {}
-        for body in args.bodies:
+        for tracker in args.trackers:
+            body, hold = TRACKERS[tracker]
             started = time.time()
-            t_track = mocap("track", str(ws), "--body", body, *extra)
+            t_track = mocap("track", str(ws), "--body", body,
+                            *[f for h in hold for f in ("--hold", h)], *extra)
             # A kept workspace whose tracks are up to date is not tracked again: no speed then.
             reused = (ws / "tracks" / "pose.json").stat().st_mtime < started
             track = read_pose_file(ws / "tracks" / "pose.json")
@@ -136,8 +145,8 @@ def main() -> None:
                 if frame % 25 == 0 or frame == frames[-1][0]:
                     ceiling.append(([ious[cam.name][-1] for cam in cameras],
                                     *_reoptimised(upright, images, unknowns, model,
-                                                  Pose(params), render)))
-            print(f"\nbody model {body}: tracked {len(frames) - len(lost)}/{len(frames)} "
+                                                  Pose(params), render, hold)))
+            print(f"\ntracker {tracker}: tracked {len(frames) - len(lost)}/{len(frames)} "
                   f"frames; lost: {lost or 'none'}")
             print("silhouette IoU per camera over the known pixels (median, min over frames; "
                   "over all pixels):")
@@ -167,17 +176,17 @@ def main() -> None:
             if pictures:
                 width = max(p.shape[1] for p in pictures)
                 pictures = [np.pad(p, ((0, 0), (0, width - p.shape[1]), (0, 0))) for p in pictures]
-                picture = OUT / f"tracking_pose2sim_{body}.png"
+                picture = OUT / f"tracking_pose2sim_{tracker}.png"
                 cv2.imwrite(str(picture), np.vstack(pictures))
                 print(f"overlay: {picture} (frames {sorted(show)})")
-            medians[body] = median
-        if len(medians) == 2:
-            print(f"median IoU, mpfb / superquadric: "
-                  f"{medians['mpfb'] / medians['superquadric']:.3f} "
-                  f"({medians['mpfb']:.3f} / {medians['superquadric']:.3f})")
+            medians[tracker] = median
+        for a, b in (("mpfb", "superquadric"), ("mpfb", "mpfb-24")):
+            if a in medians and b in medians:
+                print(f"median IoU, {a} / {b}: {medians[a] / medians[b]:.3f} "
+                      f"({medians[a]:.3f} / {medians[b]:.3f})")
 
 
-def _reoptimised(cameras, images, unknowns, model, pose, render):
+def _reoptimised(cameras, images, unknowns, model, pose, render, hold):
     """IoU per view of the pose re-optimised on this frame alone, and of pose and shape
     re-optimised on it (cameras and poses in the upright frame)."""
     from tracking.track.energy import known_iou
@@ -189,7 +198,7 @@ def _reoptimised(cameras, images, unknowns, model, pose, render):
                           None if u is None else ~u)
                 for cam, image, u in zip(cameras, images, unknowns, strict=True)]  # fmt: skip
 
-    config = TrackConfig(body=model.name)
+    config = TrackConfig(body=model.name, hold=hold)
     fixed = SilhouetteTracker(cameras, config, model=model, unknown=unknowns)
     free = SilhouetteTracker(cameras, config, model=model, unknown=unknowns)
     return (ious(fixed, fixed.refine(images, pose)),

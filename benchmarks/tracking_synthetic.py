@@ -12,7 +12,8 @@ by both body models, in one run.
 * the CMU run (cmu_run.bvh, from clip frame 1: frame 0 is its T-pose) on that subject.
 
 `mocap track` tracks each with its defaults (automatic initialisation from the visual hull,
-the shape pass over the first frames) but ``--body`` superquadric, then mpfb (`TRACKERS`).
+the shape pass over the first frames) but ``--body`` superquadric, then mpfb, then mpfb with
+the spine's side bend and twist held at 0 (`TRACKERS`; ``--trackers`` picks some).
 Neither tracker starts from the subject: the superquadric one estimates segment lengths, the
 mpfb one starts at MakeHuman's average subject of the hull's height, unclothed, and refines
 its macro shape and clothing. The superquadric subject tracked by the superquadric model is
@@ -112,12 +113,12 @@ def synth_subject(ws: Path, clip: Path, body: list[str]) -> None:
     mocap("synth", str(ws), "--bvh", str(clip), "--cameras", "4", "--size", "640x480", *body)
 
 
-def track_case(ws: Path, label: str, tracker_body: str, frames: int | None) -> Case:
-    """`mocap track` with its defaults but ``--body tracker_body``, scored against the
+def track_case(ws: Path, label: str, tracker: list[str], frames: int | None) -> Case:
+    """`mocap track` with its defaults but the ``tracker`` flags, scored against the
     subject's own joints (gt/joints.csv): MPJPE, and MPJPE after removing each joint's mean
     offset over the clip (what a different joint definition costs)."""
     extra = ["--last", str(frames - 1)] if frames else []
-    seconds = mocap("track", str(ws), "--overwrite", "--body", tracker_body, *extra)
+    seconds = mocap("track", str(ws), "--overwrite", *tracker, *extra)
     truth, tracked = _joints(ws / "gt" / "joints.csv"), _joints(ws / "tracks" / "joints.csv")
     run = json.loads((ws / "run.json").read_text())["steps"]["track"]["summary"]
     scored = sorted(f for f in truth if not frames or f < frames)
@@ -142,13 +143,22 @@ SUBJECTS: tuple[tuple[str, Path, list[str]], ...] = (
     ("run, mpfb mismatched subject", RUN, []),
 )
 """(label, clip, synth flags) of each subject; every one is tracked by every body model."""
-TRACKERS: tuple[str, ...] = ("superquadric", "mpfb")
+TRACKERS: dict[str, list[str]] = {
+    "superquadric": ["--body", "superquadric"],
+    "mpfb": ["--body", "mpfb"],
+    "mpfb-24": ["--body", "mpfb", "--hold", "spine_bend", "--hold", "spine_twist"],
+}
+"""`mocap track` flags of each tracker: the two body models with their defaults, and mpfb
+without the spine's side bend and twist (the thesis' 24 parameters), which shows whether those
+two degrees of freedom pay."""
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, help="track only the first N frames")
     parser.add_argument("--keep", type=Path, help="keep the workspaces in this folder")
+    parser.add_argument("--trackers", nargs="+", default=list(TRACKERS), choices=TRACKERS,
+                        help="trackers to run (default: all)")
     args = parser.parse_args()
     for clip in (WALK, RUN):
         if not clip.exists():
@@ -159,9 +169,9 @@ def main() -> None:
         for k, (subject, clip, flags) in enumerate(SUBJECTS):
             ws = root / f"subject{k}"
             synth_subject(ws, clip, flags)
-            for body in TRACKERS:
-                cases[subject, body] = track_case(ws, f"{subject} / tracker {body}", body,
-                                                  args.frames)  # fmt: skip
+            for name in args.trackers:
+                cases[subject, name] = track_case(ws, f"{subject} / tracker {name}",
+                                                  TRACKERS[name], args.frames)  # fmt: skip
             if k == 0:
                 _renderer_speeds(ws)
         print(f"\n{'subject / tracker body model':<58}{'MPJPE':>8}{'offsets out':>13}"
@@ -174,10 +184,12 @@ def main() -> None:
             print(f"per joint (mm), {c.label}: " + ", ".join(
                 f"{n} {v:.1f}" for n, v in c.per_joint.items()))
         for subject, _, _ in SUBJECTS:
-            sq, mp = cases[subject, "superquadric"], cases[subject, "mpfb"]
-            print(f"{subject}: MPJPE mpfb / superquadric tracker {mp.mpjpe_mm / sq.mpjpe_mm:.2f}")
+            for a, b in (("mpfb", "superquadric"), ("mpfb", "mpfb-24")):
+                if (subject, a) in cases and (subject, b) in cases:
+                    print(f"{subject}: MPJPE {a} / {b} tracker "
+                          f"{cases[subject, a].mpjpe_mm / cases[subject, b].mpjpe_mm:.2f}")
         for subject, _, flags in SUBJECTS:
-            if "superquadric" in flags:
+            if "superquadric" in flags or (subject, "mpfb") not in cases:
                 continue
             c = cases[subject, "mpfb"]
             print(f"target ({subject}, mpfb tracker) MPJPE <= 25 mm, none lost: "

@@ -60,9 +60,11 @@ def package_versions() -> dict[str, str]:
 
 
 STEP_VERSIONS: dict[str, int] = {
-    "track": 2,  # poses in the rig's upright frame (pose.json's world_from_upright)
-    "fit": 3,  # 2: fit.json is a pose file (frames, world_from_upright) that --init-pose reads;
-    # 3: a limb fitted elsewhere fails the fit, and a skinned body fits clouds of unknown scale
+    "track": 3,  # 2: poses in the rig's upright frame (pose.json's world_from_upright);
+    # 3: 26 pose parameters (the spine's side bend and twist)
+    "fit": 4,  # 2: fit.json is a pose file (frames, world_from_upright) that --init-pose reads;
+    # 3: a limb fitted elsewhere fails the fit, and a skinned body fits clouds of unknown scale;
+    # 4: 26 pose parameters, and a plane through the body is no longer taken for a floor
 }
 """The version of each step's code (unlisted steps: 1). Bump a step's number when its outputs
 change for the same settings (a new format or method): its results in existing workspaces are

@@ -47,7 +47,7 @@ def silhouettes_config(args: argparse.Namespace) -> Any:
 class BodyCommand:
     help = "posed body mesh and joints of one BVH frame"
     description = ("Retarget frame K of a BVH clip onto the articulated body model (bone "
-                   "lengths give the shape, least squares the 24 pose parameters) and write "
+                   "lengths give the shape, least squares the 26 pose parameters) and write "
                    "OUT/body.ply (metres, Y up, in the BVH's world) and OUT/joints.json.")
 
     def add_arguments(self, parser: argparse.ArgumentParser) -> None:
@@ -118,7 +118,7 @@ class TrackCommand:
 
 class FitCommand:
     help = "fit the articulated body model to a human point cloud"
-    description = ("Estimate the body's shape and 24 pose parameters from a point cloud: a "
+    description = ("Estimate the body's shape and 26 pose parameters from a point cloud: a "
                    "workspace's dense cloud (mocap fit WS → WS/body/fit.json, fit.ply, "
                    "logs/fit.rrd) or any point cloud in metres (mocap fit --cloud FILE.ply --out "
                    "DIR → DIR/fit.json, fit.ply, fit.rrd). Initialisation is automatic: the "

@@ -37,7 +37,7 @@ POSE = "ws/tracks/pose.json"
 
 @functools.cache
 def _walk_params() -> np.ndarray:
-    """(FRAMES, 24) the walk's pose parameters."""
+    """(FRAMES, N_POSE_PARAMS) the walk's pose parameters."""
     return np.stack([p.params for p in walking_poses(FRAMES, FPS, SHAPE)])
 
 

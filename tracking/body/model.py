@@ -1,4 +1,4 @@
-"""Generic articulated body model of thesis section 6.2.2: a skeleton, a 24-parameter pose, a mesh.
+"""Generic articulated body model of thesis section 6.2.2: a skeleton, a 26-parameter pose, a mesh.
 
 The thesis model is "a hierarchic arrangement of 29 body segments" (closed triangle meshes,
 5,600 triangles and 2,894 vertices) driven by "a skeleton of 11 joints"; 3-DOF ball joints and
@@ -17,6 +17,10 @@ is the one place that says so):
   6 + 1 + 1 + 4 x (3 + 1) = 24, over the 11 joints pelvis, spine, neck, 2 shoulders, 2 elbows,
   2 hips, 2 knees. Hand and foot orientation (6.2.5's last step) is not in the 24, so wrists and
   ankles are fixed end sites here.
+* spine (waist)          +2 side bend and twist of the chest (issue 19: the skinned body's chest
+                         turns and bends over the pelvis in gait and in most other motions);
+                         appended after the 24 so that a pose file of the thesis' 24 reads as
+                         this layout's first 24, with the two at 0.
 
 Conventions (those of `tracking.body.bvh`):
 
@@ -138,7 +142,16 @@ POSE_LAYOUT: tuple[PoseParam, ...] = (
            "+ swings the shank backward (knee flexion)"),
     *_limb("r", "hip", "knee", _X, (-30.0, 45.0), (-125.0, 30.0), (-45.0, 45.0),
            "+ swings the shank backward (knee flexion)"),
+    # The chest's side bend and twist about the waist (session 17). They come last so that a
+    # file of the 24 parameters above (the layout before them) is this layout's first 24, read
+    # with both 0 (`tracking.body.motion.read_pose_file`); the spine's rotations apply in layout
+    # order, flexion, side bend, twist: intrinsic XZY, the order of the report's spine angles.
+    _rot("spine_bend", "spine", _Z, -35.0, 35.0, "+ bends the chest to the subject's left"),
+    _rot("spine_twist", "spine", _Y, -45.0, 45.0, "+ turns the chest to the subject's left"),
 )  # fmt: skip
+LEGACY_POSE_PARAMS: int = 24
+"""Length of the layout before the spine's side bend and twist were added: pose files of that
+length are read with those two at 0."""
 N_POSE_PARAMS: int = len(POSE_LAYOUT)
 PARAM_INDEX: dict[str, int] = {p.name: i for i, p in enumerate(POSE_LAYOUT)}
 LOWER_LIMITS: np.ndarray = np.array([p.lower for p in POSE_LAYOUT])
@@ -169,9 +182,10 @@ subject (it also keeps forward kinematics far from float overflow)."""
 
 
 def pose_params_problem(params: np.ndarray, *, joint_limits: bool = True) -> str | None:
-    """Why the stored parameters (24,) are not a pose of this model, or None when they are:
-    a value that is not finite, a root translation beyond `ROOT_TRANSLATION_BOUND_M`, or (with
-    ``joint_limits``) a value more than `LIMIT_TOLERANCE_RAD` outside its `POSE_LAYOUT` range.
+    """Why the stored parameters (`N_POSE_PARAMS`,) are not a pose of this model, or None when
+    they are: a value that is not finite, a root translation beyond `ROOT_TRANSLATION_BOUND_M`,
+    or (with ``joint_limits``) a value more than `LIMIT_TOLERANCE_RAD` outside its
+    `POSE_LAYOUT` range.
     The text names the first such parameter, its value and its range, in its units (degrees
     for rotations)."""
     params = np.asarray(params, dtype=float)
@@ -209,7 +223,8 @@ class LimitViolation:
 
 @dataclass(frozen=True)
 class Pose:
-    """A body pose: params (24,) in `POSE_LAYOUT` order, metres and radians. Immutable."""
+    """A body pose: params (`N_POSE_PARAMS`,) in `POSE_LAYOUT` order, metres and radians.
+    Immutable."""
 
     params: np.ndarray
 
@@ -497,7 +512,7 @@ PARAM_MOVES_NODE: np.ndarray = _subtree_mask()
 def pose_derivative_axes(pose: Pose, shape: BodyShape) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What the derivatives of world points with respect to the pose parameters need.
 
-    Returns world_from_node (16, 4, 4), axis_in_world (24, 3) and pivot_in_world (24, 3): a
+    Returns world_from_node (16, 4, 4), axis_in_world (P, 3) and pivot_in_world (P, 3): a
     point w rigidly attached to a node moved by parameter k (`PARAM_MOVES_NODE`) changes at
     dw/dp_k = axis_k x (w - pivot_k) for a rotation and dw/dp_k = axis_k for a translation
     (pivot 0); a direction n attached to it changes at axis_k x n (rotations only).

@@ -3,14 +3,16 @@
 `motion_from_poses` writes the 16-node skeleton of `tracking.body.model` as a BVH hierarchy that
 Blender, Maya and MotionBuilder import: the pelvis is the ROOT with
 ``Xposition Yposition Zposition Zrotation Xrotation Yrotation``, the other ten joints carry
-``Zrotation Xrotation Yrotation`` (the model's own intrinsic ZXY order, so a 3-DOF joint's
-channels are exactly its three pose parameters in degrees), and the head top, wrists and ankles
-are End Sites. A hinge (spine, neck, elbow, knee) is written as a 3-channel joint whose Z and Y
-channels stay 0; the X channel is the hinge angle with the sign of its axis (the elbow's axis is
--X). OFFSETs are in metres, Y up, the body faces +Z at rest: the conventions of `tracking.body.bvh`.
+``Zrotation Xrotation Yrotation`` (the model's own intrinsic ZXY order, so a ball joint's
+channels are exactly its three pose parameters in degrees; the spine's flexion, side bend and
+twist apply in XZY order, so its channels are the same rotation in ZXY), and the head top,
+wrists and ankles are End Sites. A hinge (neck, elbow, knee) is written as a 3-channel joint
+whose Z and Y channels stay 0; the X channel is the hinge angle with the sign of its axis (the
+elbow's axis is -X). OFFSETs are in metres, Y up, the body faces +Z at rest: the conventions of
+`tracking.body.bvh`.
 
 `poses_from_motion` is the exact inverse for a file with this skeleton: it reads the bone
-lengths back from the OFFSETs and the 24 parameters from the channels. A BVH carries the
+lengths back from the OFFSETs and the pose parameters from the channels. A BVH carries the
 skeleton but no segment girths, so those are `BodyShape.default`'s for the skeleton's height.
 Any other skeleton (the CMU one) goes through `tracking.body.retarget` instead (`poses_from_bvh`).
 
@@ -40,6 +42,7 @@ from tracking.body.bvh import (
     rotations_to_channels,
 )
 from tracking.body.model import (
+    LEGACY_POSE_PARAMS,
     LOWER_LIMITS,
     NODE_NAMES,
     NODE_PARENTS,
@@ -152,9 +155,10 @@ def poses_from_motion(motion: Motion) -> tuple[list[Pose], BodyShape]:
         owned = [i for i, p in enumerate(POSE_LAYOUT) if p.joint == name and p.kind == "rotation"]
         if not owned:
             continue
-        if len(owned) == 3:  # ball joint: its parameters are the ZXY angles themselves
+        if len(owned) == 3:  # its parameters are the angles of its own order (ZXY, spine XZY)
+            order = "".join("XYZ"[int(np.argmax(np.abs(POSE_LAYOUT[i].axis)))] for i in owned)
             params[:, owned] = _ball_angles_in_limits(
-                np.deg2rad(rotations_to_channels(rotations[:, k], "ZXY")), owned)
+                np.deg2rad(rotations_to_channels(rotations[:, k], order)), owned)
         else:
             # Hinge about +-X: the angle of the rotation about X itself, signed by the axis.
             # (Not the X angle of a ZXY decomposition: that lies in [-90, 90] degrees, and a
@@ -166,17 +170,19 @@ def poses_from_motion(motion: Motion) -> tuple[list[Pose], BodyShape]:
 
 def zxy_twin(zxy: np.ndarray) -> np.ndarray:
     """(..., 3) the other ZXY angle triple of the same rotations: (z + 180, 180 - x, y + 180)
-    degrees, wrapped into [-180, 180)."""
+    degrees, wrapped into [-180, 180). The same holds for any order of three distinct axes
+    (the spine's XZY)."""
     twin = np.asarray(zxy, float) + np.array([np.pi, 0.0, np.pi])
     twin[..., 1] = np.pi - np.asarray(zxy)[..., 1]
     return np.mod(twin + np.pi, 2 * np.pi) - np.pi
 
 
 def _ball_angles_in_limits(zxy: np.ndarray, owned: list[int]) -> np.ndarray:
-    """Of the two ZXY angle triples (F, 3) of each rotation, (z, x, y) and
-    (z + 180, 180 - x, y + 180) degrees, the one nearer the joint's limits (`owned`: its three
-    parameter indices): a shoulder lifted 120 degrees forward has x = -120 within its range, but
-    the decomposition returns the twin with x = -60 and its twist 180 degrees out of range."""
+    """Of the two angle triples (F, 3) of each rotation (ZXY, or the joint's own order),
+    (z, x, y) and (z + 180, 180 - x, y + 180) degrees, the one nearer the joint's limits
+    (`owned`: its three parameter indices): a shoulder lifted 120 degrees forward has x = -120
+    within its range, but the decomposition returns the twin with x = -60 and its twist 180
+    degrees out of range."""
     twin = zxy_twin(zxy)
 
     def excess(angles: np.ndarray) -> np.ndarray:
@@ -188,7 +194,7 @@ def _ball_angles_in_limits(zxy: np.ndarray, owned: list[int]) -> np.ndarray:
 
 
 PoseFrames = list[tuple[int, "np.ndarray | None"]]
-"""(frame, params (24,) or None when the frame is lost), sorted by frame."""
+"""(frame, params (`N_POSE_PARAMS`,) or None when the frame is lost), sorted by frame."""
 
 
 class PoseFile(NamedTuple):
@@ -206,12 +212,12 @@ class PoseFile(NamedTuple):
 
 
 def read_pose_file(path: Path | str) -> PoseFile:
-    """Frame rate, shape, (frame, params (24,) or None when lost) sorted by frame, and frame
-    of a pose file::
+    """Frame rate, shape, (frame, params (`N_POSE_PARAMS`,) or None when lost) sorted by frame,
+    and frame of a pose file::
 
         {"frame_rate": 25.0,
          "shape": {<every BodyShape field>: metres, ...},
-         "frames": [{"frame": 0, "params": [24 floats in POSE_LAYOUT order]},
+         "frames": [{"frame": 0, "params": [26 floats in POSE_LAYOUT order]},
                     {"frame": 1, "params": null}, ...],
          "world_from_upright": [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
          "body": {"name": "superquadric"}}
@@ -220,7 +226,9 @@ def read_pose_file(path: Path | str) -> PoseFile:
     rotation about the origin, takes them to the world frame of the cameras (default: the
     identity, a Y-up world). ``frame_rate`` may be missing or null for a single pose
     (`mocap fit`'s fit.json, posed in its cloud's frame). Other keys are ignored, except that
-    a file saying ``"success": false`` (a body fit that failed) is refused.
+    a file saying ``"success": false`` (a body fit that failed) is refused. Params of
+    `LEGACY_POSE_PARAMS` (the layout before the spine's side bend and twist) are read with
+    those two at 0.
 
     What no writer of the format produces is refused too, so that nothing downstream computes
     with it: a frame number that is not an integer from 0 (to `MAX_FRAME_NUMBER`) or that
@@ -282,11 +290,13 @@ def read_pose_file(path: Path | str) -> PoseFile:
             row = None if values is None else np.asarray(values, dtype=float)
         except (TypeError, ValueError):
             raise UserError(f"{path}: frame {frame}: params is not a list of numbers") from None
+        if row is not None and row.size and np.isnan(row).all():
+            row = None  # a lost frame written as NaN rather than null
+        if row is not None and row.shape == (LEGACY_POSE_PARAMS,):
+            row = np.concatenate([row, np.zeros(len(POSE_LAYOUT) - LEGACY_POSE_PARAMS)])
         if row is not None and row.shape != (len(POSE_LAYOUT),):
             raise UserError(f"{path}: frame {frame} has {row.size} pose parameters, "
-                            f"not {len(POSE_LAYOUT)}")
-        if row is not None and np.isnan(row).all():
-            row = None  # a lost frame written as NaN rather than null
+                            f"not {len(POSE_LAYOUT)} (or the thesis' {LEGACY_POSE_PARAMS})")
         if row is not None and (problem := pose_params_problem(row)) is not None:
             raise UserError(f"{path}: frame {frame}: {problem}")
         frames.append((frame, row))

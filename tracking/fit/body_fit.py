@@ -1,9 +1,9 @@
-"""Fit the articulated body model to a human point cloud: scale and the 24 pose parameters.
+"""Fit the articulated body model to a human point cloud: scale and the 26 pose parameters.
 
 Chapter 5 of the thesis leaves "fitting a predefined 3D human skeleton model" to the
 reconstructed cloud as future work; this is it. Pure numpy/scipy, no I/O.
 
-The unknowns are the 24 pose parameters (`tracking.body.model.POSE_LAYOUT`) and two shape scales:
+The unknowns are the 26 pose parameters (`tracking.body.model.POSE_LAYOUT`) and two shape scales:
 the height h (every length of `BodyShape.default(h)`) and a girth factor g that multiplies every
 segment radius. The cost is a robust distance from the cloud's points to the posed model
 surface, minimised by ICP: match every point to the nearest point of a dense sample of the model
@@ -188,6 +188,27 @@ class FitConfig:
         metadata={"help": "ICP rounds of a skinned body's refinement (--body other than "
                   "superquadric)"},
     )  # fmt: skip
+    hold: tuple[str, ...] = field(
+        default=(),
+        metadata={"help": "a pose parameter held at 0, not fitted (repeatable): spine_bend "
+                  "or spine_twist", "metavar": "PARAM"},
+    )  # fmt: skip
+
+    def __post_init__(self) -> None:
+        from recon.errors import UserError
+
+        for name in self.hold:
+            if name not in _HOLDABLE:
+                raise UserError(f"--hold {name}: only {' and '.join(_HOLDABLE)} can be held")
+
+    def free(self, size: int) -> np.ndarray:
+        """The unknowns 0..size-1 that are fitted: all but the pose parameters of `hold`."""
+        return np.setdiff1d(np.arange(size), [PARAM_INDEX[name] for name in self.hold])
+
+
+_HOLDABLE = ("spine_bend", "spine_twist")
+"""The pose parameters a fit can hold at 0 (`FitConfig.hold`): the searches of the fit never
+move them, so holding them is the thesis' 24 parameters."""
 
 
 @dataclass(frozen=True)
@@ -537,7 +558,7 @@ def search_limbs(problem: Any, x: np.ndarray, points: np.ndarray,
     on the limb's own four parameters, and the lowest cost (the current configuration
     included) is kept. problem: `_Problem`, or any with its ``bounds``,
     ``cost``, ``icp`` and ``n_samples`` (e.g. `tracking.fit.skinned_fit.SkinnedProblem`),
-    whose unknowns start with the 24 pose parameters."""
+    whose unknowns start with the 26 pose parameters."""
     lo, hi = problem.bounds
     for limb in limbs or tuple(_LIMBS):
         idx = _LIMBS[limb]
@@ -680,12 +701,15 @@ def fit_body(points: np.ndarray, config: FitConfig | None = None,
         return [judged[x.tobytes()] for _, x in ranked if x.tobytes() in judged]
 
     fits: list[tuple[float, np.ndarray]] = []
-    everything = np.arange(N_POSE_PARAMS + 2)
+    everything = config.free(N_POSE_PARAMS + 2)
+    # The coarse, robust pass leaves the spine's side bend and twist at 0: free, they turn the
+    # chest to take a misplaced arm's points (the thesis' 24 parameters and the scales).
+    thesis = np.setdiff1d(everything, [PARAM_INDEX[name] for name in _HOLDABLE])
     for tried, x in enumerate(_orientations(roots, config.max_orientations, rotations[0][:, 1])):
         if tried >= config.orientations and any(v[0] for v in verdicts(fits)):
             break
         x = search_limbs(problem, x, coarse)
-        x = problem.icp(x, coarse, everything, rounds=5, steps=3, loss="cauchy")
+        x = problem.icp(x, coarse, thesis, rounds=5, steps=3, loss="cauchy")
         # A second pass: a limb that lost its points to a misplaced neighbour finds them now.
         x = search_limbs(problem, x, coarse)
         x = problem.icp(x, points, everything, rounds=config.iterations, steps=3)

@@ -5,7 +5,7 @@ The superquadric fit (`tracking.fit.body_fit.fit_body`) is the start: its search
 the orientation and the limbs, and its pose drives any model of the same layout
 (`tracking.body.model.POSE_LAYOUT`). From the plugin's `tracking_model` of the fitted height,
 at its full resolution when it has one (the cloud is dense; mpfb's ``mesh="full"``), ICP moves
-the 24 pose parameters (within the joint limits) and the shape parameters
+the 26 pose parameters (within the joint limits) and the shape parameters
 (`TrackedModel.shape_parameters`: mpfb's gender, muscle, weight, height, proportions and
 clothing) together:
 
@@ -76,7 +76,7 @@ def _on_triangles(vertices: np.ndarray, corners: np.ndarray,
 
 
 class SkinnedProblem:
-    """ICP of a skinned model over x = (24 pose parameters, its shape parameters), the
+    """ICP of a skinned model over x = (26 pose parameters, its shape parameters), the
     interface of `tracking.fit.body_fit`'s searches (``bounds``, ``cost``, ``icp``,
     ``n_samples``); `scale`: the robust scale (cloud units)."""
 
@@ -184,7 +184,7 @@ def refine_skinned(body: str, height_m: float, pose: Pose, points: np.ndarray,
     base = fitting_model(body, height_m)
     problem = SkinnedProblem(base, config.robust_scale * base.shape.height)
     x = problem.start(pose)
-    everything = np.arange(len(x))
+    everything = config.free(len(x))
     x = problem.icp(x, points, everything, rounds=config.body_rounds, steps=_STEPS_PER_ROUND)
     coarse = points[np.random.default_rng(config.seed).choice(
         len(points), min(400, len(points)), replace=False)]
@@ -209,6 +209,6 @@ def repair_limbs(model: TrackedModel, pose: Pose, points: np.ndarray, config: Fi
     coarse = points[np.random.default_rng(config.seed).choice(
         len(points), min(400, len(points)), replace=False)]
     x = search_limbs(problem, x, coarse, limbs, exhaustive=True)
-    x = problem.icp(x, points, np.arange(len(x)), rounds=config.body_rounds,
+    x = problem.icp(x, points, config.free(len(x)), rounds=config.body_rounds,
                     steps=_STEPS_PER_ROUND)  # fmt: skip
     return problem.model(x), Pose(x[:N_POSE_PARAMS])

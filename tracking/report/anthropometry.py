@@ -9,7 +9,7 @@ first endpoint) and radii of gyration (fractions of the segment length) about th
 axis names. For the foot, whose longitudinal axis is the heel-toe line, the "sagittal" axis is
 the vertical one.
 
-How the table maps onto the 24-parameter skeleton of `tracking.body.model` (one rigid segment per
+How the table maps onto the skeleton of `tracking.body.model` (one rigid segment per
 node; end sites carry no segment of their own; Y up, X to the subject's left, Z forward, node
 frames parallel to the world at rest):
 
@@ -37,7 +37,7 @@ foot           ankle      foot HEEL-TTIP          heel (0, -ankle_height, -0.2 f
 
 The foot's centre of mass lies on the heel-toe line at de Leva's fraction, raised to half the
 ankle height: the table gives only its position along the segment, and the foot's mass sits
-between the sole and the ankle, not on the sole. Wrists and ankles are rigid in the 24-parameter
+between the sole and the ankle, not on the sole. Wrists and ankles are rigid in the
 model, so hand and foot move with the forearm and shank.
 """
 

@@ -23,7 +23,7 @@ Assumptions, stated in every report (`ASSUMPTIONS`):
   the ground it equals the total ground reaction (moved to the pelvis joint centre), which
   still cannot be split between the two feet without force plates.
 * Segments are rigid, with de Leva's inertial parameters scaled to the subject's segment lengths
-  and an assumed body mass; wrists and ankles are rigid in the 24-parameter model.
+  and an assumed body mass; wrists and ankles are rigid in the body model.
 * Gravity is -9.81 m/s^2 along the world Y axis (the body model's up axis).
 """
 

@@ -415,7 +415,7 @@ JOINT_ANGLE_CONVENTIONS: tuple[AngleConvention, ...] = (
     *_limb("elbow", -1.0, "forearm vs humerus: flexion, abduction, internal rotation"),
     *_limb("hip", -1.0, "thigh vs pelvis: flexion, abduction, internal rotation"),
     *_limb("knee", 1.0, "shank vs thigh: flexion, abduction, internal rotation"),
-    # Rigid in the 24-parameter model (angles always 0): used to resolve joint moments only.
+    # Rigid in the body model (angles always 0): used to resolve joint moments only.
     *_limb("wrist", -1.0, "hand vs forearm: forward swing, abduction, internal rotation"),
     *_limb("ankle", -1.0, "foot vs shank: dorsiflexion, abduction, internal rotation"),
 )  # fmt: skip

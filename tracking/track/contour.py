@@ -330,7 +330,7 @@ def refine_shape(base: TrackedModel, frames: Sequence[tuple[Sequence[Camera],
                  Sequence[np.ndarray], Sequence[np.ndarray | None]]],
                  poses: Sequence[np.ndarray], renderer: object,
                  energy: Callable[[TrackedModel, Sequence[np.ndarray]], float],
-                 config: ContourConfig | None = None,
+                 config: ContourConfig | None = None, free: Sequence[int] | None = None,
                  ) -> tuple[TrackedModel, list[np.ndarray], float]:  # fmt: skip
     """The shape parameters of `base` (`TrackedModel.shape_parameters`: the segment scales of
     `tracking.body.model.SHAPE_GROUPS`, or a skinned body's macro modifiers) and the poses of
@@ -339,7 +339,8 @@ def refine_shape(base: TrackedModel, frames: Sequence[tuple[Sequence[Camera],
 
     energy(model, poses): the XOR energy summed over the frames, which every accepted step
     lowers. Shape derivatives are forward differences of the vertices (the parameters' own
-    step). Returns the reshaped model, the poses and their energy.
+    step). free: the pose parameters refined (default: all; the others keep their values).
+    Returns the reshaped model, the poses and their energy.
     """
     cfg = config or ContourConfig()
     outlines = [_FrameOutlines(c, m, cfg, k) for c, m, k in frames]
@@ -347,7 +348,7 @@ def refine_shape(base: TrackedModel, frames: Sequence[tuple[Sequence[Camera],
     values = np.asarray(params.values, float).copy()
     poses = [np.clip(np.asarray(x, float), LOWER_LIMITS, UPPER_LIMITS) for x in poses]
     n_shape, n_pose = len(values), len(LOWER_LIMITS)
-    free = np.arange(n_pose)
+    free = np.arange(n_pose) if free is None else np.asarray(free)
     lo = np.concatenate([params.lower, np.tile(LOWER_LIMITS, len(poses))])
     hi = np.concatenate([params.upper, np.tile(UPPER_LIMITS, len(poses))])
     h = params.step

@@ -7,7 +7,7 @@ or `mocap silhouettes`) and writes, each atomically:
   `tracking.body.model.NODE_NAMES` (those of ``gt/joints.csv``); lost frames have no rows;
 * ``tracks/pose.json``: ``{"frame_rate", "shape": {BodyShape}, "body": {"name": the body
   model plugin, and what rebuilds its subject, e.g. mpfb's "macro"}, "world_from_upright":
-  (3, 3), "frames": [{"frame", "params" (24, POSE_LAYOUT order) or null when lost, "energy_px",
+  (3, 3), "frames": [{"frame", "params" (26, POSE_LAYOUT order) or null when lost, "energy_px",
   "xor_fraction", "event"}]}``;
 * ``tracks/motion.bvh``: the tracked frames on the body skeleton (`tracking.body.motion`); a
   BVH has no gaps, so a lost frame repeats the last tracked pose (pose.json says which);

@@ -3,17 +3,18 @@ silhouettes best overlap the image silhouettes (the XOR energy of `tracking.trac
 
 Per frame, starting from a constant-velocity prediction of the previous two frames:
 
-0. all 24 parameters together against the silhouette outlines (`tracking.track.contour`, damped
+0. all 26 parameters (`TrackConfig.hold` aside) together against the silhouette outlines
+   (`tracking.track.contour`, damped
    Gauss-Newton, a step kept only when the XOR energy drops);
 1. root: the 6 global parameters by downhill simplex (Nelder-Mead), coarse pyramid level first;
-2. "head and hip": the spine and neck bends, by simplex;
+2. "head and hip": the spine's flexion, side bend and twist and the neck's nod, by simplex;
 3. each limb's 4 parameters (ball joint + hinge): a regular grid over the two swing angles and
    the hinge, around the prediction, over a range adapted to the parameter changes of the two
    preceding frames; only valid samples are scored (thesis: the elbow and wrist, or knee and
    ankle, project inside the silhouette in every view and lie at least a minimum distance from
    the torso axis); the best sample is refined by simplex;
 4. a final simplex over the root at the finest level. (The thesis' last step, hands and feet,
-   has no parameters in our 24-parameter model: wrists and ankles are rigid end sites.)
+   has no parameters in our model: wrists and ankles are rigid end sites.)
 5. step 0 again; the better of steps 0 and 5 by XOR is the frame's pose.
 
 Steps 1-4 alone drift along directions the silhouettes hardly tell apart (pelvis pitch against
@@ -35,8 +36,9 @@ the shape parameters (the segment lengths, or the skinned body's macro shape and
 `TrackedModel.shape_parameters`) then come from the outlines, and `calibrate_shape` refines
 them over several frames of a first pass. The rotation angles of the root lock at a 90
 degree pitch, so an upright body should be tracked in a Y-up frame
-(`tracking.rig.cameras.upright_frame`; `mocap track` does). A pose given by the user
-replaces this ("model alignment", thesis 6.2.4).
+(`tracking.rig.cameras.upright_frame`; `mocap track` does). The spine's side bend and twist
+stay 0 through this start and the shape pass (`_START_HELD`) and are tracked from then on. A
+pose given by the user replaces this ("model alignment", thesis 6.2.4).
 
 A frame whose energy stays above `max_xor_fraction` of the silhouette area (or 1.5 times the
 lowest XOR of an initialisation, when real silhouettes with holes and ghosts set a higher
@@ -78,7 +80,13 @@ from tracking.track.render import render_views
 
 _ROOT = [PARAM_INDEX[n] for n in ("root_tx", "root_ty", "root_tz", "root_rz", "root_rx",
                                   "root_ry")]  # fmt: skip
-_TRUNK = [PARAM_INDEX["spine_flex"], PARAM_INDEX["neck_flex"]]
+# The trunk's parameters and the simplex's first steps for them, radians.
+_TRUNK = [PARAM_INDEX[n] for n in ("spine_flex", "neck_flex", "spine_bend", "spine_twist")]
+_TRUNK_STEPS = np.deg2rad([8.0, 8.0, 5.0, 8.0])
+_START_HELD = ("spine_bend", "spine_twist")
+"""Held at 0 while the start is searched (the visual-hull fit, the competing starts, the shape
+pass) and freed for tracking: free there, they cost the Pose2Sim demo 0.734 -> 0.686 median
+IoU (another start won, a worse basin for the whole clip), session 17."""
 # Limb: (ball-joint parameters rz, rx, ry, hinge), its two end nodes and the torso clearance
 # as a fraction of the shape's chest half width (arms) or hip half width (legs).
 _LIMBS: dict[str, tuple[list[int], tuple[str, str], str]] = {
@@ -94,7 +102,7 @@ _LIMBS: dict[str, tuple[list[int], tuple[str, str], str]] = {
 }  # fmt: skip
 _MOVES = PARAM_MOVES_NODE
 _TWISTS = [PARAM_INDEX[f"{side}_{joint}_ry"] for side in ("l", "r")
-           for joint in ("shoulder", "hip")]  # fmt: skip
+           for joint in ("shoulder", "hip")] + [PARAM_INDEX["spine_twist"]]  # fmt: skip
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -186,6 +194,12 @@ class TrackConfig:
     renderer: str = field(
         default="cpu-raster", metadata={"help": "silhouette renderer plugin (mocap plugins)"}
     )
+    hold: tuple[str, ...] = field(
+        default=(),
+        metadata={"help": "a pose parameter held at 0, not tracked (repeatable; e.g. --hold "
+                  "spine_bend --hold spine_twist tracks the thesis' 24 parameters): one of "
+                  "spine_flex, neck_flex, spine_bend, spine_twist", "metavar": "PARAM"},
+    )  # fmt: skip
     body: str = field(
         default="mpfb",
         metadata={"help": "body model plugin the tracker fits (mocap plugins): mpfb "
@@ -222,6 +236,16 @@ class TrackConfig:
             raise UserError(f"need 0 <= --min-range-deg <= --max-range-deg, got "
                             f"{self.min_range_deg} and {self.max_range_deg}")
         check_voxel_grid(self.hull_size_m, self.voxel_m, "--hull-size-m", "--voxel-m")
+        trunk = [name for name in PARAM_INDEX if PARAM_INDEX[name] in _TRUNK]
+        for name in self.hold:
+            if name not in trunk:
+                raise UserError(f"--hold {name}: only the trunk's parameters can be held ("
+                                f"{', '.join(trunk)})")
+
+    def free_params(self, also_held: tuple[str, ...] = ()) -> np.ndarray:
+        """Indices of the tracked pose parameters: all but `hold` (and `also_held`)."""
+        held = {PARAM_INDEX[name] for name in (*self.hold, *also_held)}
+        return np.array([i for i in range(N_POSE_PARAMS) if i not in held])
 
 
 @dataclass(frozen=True)
@@ -342,6 +366,9 @@ class SilhouetteTracker:
         # How `calibrate_shape` found the pose it returns: the first tracked frame starts from
         # it as from a given pose, and says this instead.
         self._start_event = ""
+        # While the start is searched (the visual-hull start, the shape pass), the spine's side
+        # bend and twist stay 0 (`_START_HELD`).
+        self._starting = False
 
     @property
     def shape(self) -> BodyShape | None:
@@ -362,57 +389,67 @@ class SilhouetteTracker:
         """The first pose: `init` if given, else the best of a body fitted to the visual hull and
         upright bodies at `init_headings` headings, each refined against the silhouettes. Sets
         the shape when it was unknown."""
+        if init is None:
+            starting, self._starting = self._starting, True
+            try:
+                return self._initialise_from_hull(masks)
+            finally:
+                self._starting = starting
+        if self.shape is None:
+            raise ValueError("an initial pose needs the subject's shape")
+        message, self._start_event = self._start_event or "init from the given pose", ""
+        x = self._refine_all(self._energy(masks), init.params.copy(), init=True)
+        self.history = []
+        return Pose(x), message
+
+    def _initialise_from_hull(self, masks: Sequence[np.ndarray]) -> tuple[Pose, str]:
+        """`initialise` without a given pose."""
         from tracking.fit.body_fit import FitConfig, fit_body
 
-        if init is None:
-            points = self.visual_hull_points(masks)
-            if len(points) < 100:
-                raise TrackingLost("the silhouettes do not intersect in a visual hull")
-            up = rig_up(self.cameras, points.mean(axis=0))
-            # The superquadrics' fit, whatever `mocap fit` defaults to: it is only a start, the
-            # silhouettes refine it (a skinned refinement of a hull is slow and no better).
-            fit = fit_body(points, FitConfig(body="superquadric", min_inlier_fraction=0.0,
-                                             max_median_residual=1.0,
-                                             max_unexplained_cluster=1.0,
-                                             min_limb_support=0.0), up=up)  # fmt: skip
-            estimate_shape = self.shape is None
-            if estimate_shape:
-                # A hull carved by few views is fatter than the body, and the fit grows the
-                # model to fill it (1.86-2.02 m for the ~1.75 m subject of the Pose2Sim demo,
-                # whose hull is 1.74 m tall): a standing subject is hardly taller than the
-                # hull along up. (Capping at the extent itself cost the synthetic walk 5 mm:
-                # the lengths' refinement then settled elsewhere.)
-                height = fit.shape.height
-                if up is not None:
-                    extent = float(np.ptp(points @ up)) + self.config.voxel_m
-                    height = min(height, 1.05 * extent)
-                self.model = self.body.tracking_model(height)
-            # The hull fit can put a limb inside the trunk or lean the trunk to explain a
-            # limb: upright bodies at several headings compete with it (each refined by the
-            # whole hierarchy, limb grids over their whole range); the lowest XOR wins.
-            energy = self._energy(masks)
-            pelvis = fit.pose.params[:3].copy()
-            if up is not None:  # standing on the hull's lowest point
-                pelvis += (np.min(points @ up) + self.shape.hip_height - pelvis @ up) * up
-            starts = [self._best_hypothesis(energy, fit.pose.params),
-                      *upright_starts(fit.pose, up, self.config.init_headings, pelvis)]
-            refined = [self._refine_all(energy, p.params.copy(), init=True) for p in starts]
-            scores = [self._objective(energy, x, self.config.final_level) for x in refined]
-            best = int(np.argmin(scores))
-            x = refined[best]
-            if estimate_shape and self.config.init_shape:
-                # People differ in proportions: the segment lengths from the silhouettes'
-                # outlines, with the pose (fixed afterwards: thesis 6.2.4).
-                x = self._refine_shape([masks], [Pose(x)])[0].params
-                x = self._refine_all(self._energy(masks), x, init=True)
-            start = "its fit" if best == 0 else (
-                f"an upright start at {360 * (best - 1) // (len(starts) - 1)} deg from its fit")
-            message = f"init from visual hull ({len(points)} surface voxels; {start})"
-        else:
-            if self.shape is None:
-                raise ValueError("an initial pose needs the subject's shape")
-            message, self._start_event = self._start_event or "init from the given pose", ""
-            x = self._refine_all(self._energy(masks), init.params.copy(), init=True)
+        points = self.visual_hull_points(masks)
+        if len(points) < 100:
+            raise TrackingLost("the silhouettes do not intersect in a visual hull")
+        up = rig_up(self.cameras, points.mean(axis=0))
+        # The superquadrics' fit, whatever `mocap fit` defaults to: it is only a start, the
+        # silhouettes refine it (a skinned refinement of a hull is slow and no better).
+        fit = fit_body(points, FitConfig(body="superquadric", min_inlier_fraction=0.0,
+                                         max_median_residual=1.0,
+                                         max_unexplained_cluster=1.0,
+                                         min_limb_support=0.0, hold=_START_HELD),
+                       up=up)  # fmt: skip
+        estimate_shape = self.shape is None
+        if estimate_shape:
+            # A hull carved by few views is fatter than the body, and the fit grows the
+            # model to fill it (1.86-2.02 m for the ~1.75 m subject of the Pose2Sim demo,
+            # whose hull is 1.74 m tall): a standing subject is hardly taller than the
+            # hull along up. (Capping at the extent itself cost the synthetic walk 5 mm:
+            # the lengths' refinement then settled elsewhere.)
+            height = fit.shape.height
+            if up is not None:
+                extent = float(np.ptp(points @ up)) + self.config.voxel_m
+                height = min(height, 1.05 * extent)
+            self.model = self.body.tracking_model(height)
+        # The hull fit can put a limb inside the trunk or lean the trunk to explain a
+        # limb: upright bodies at several headings compete with it (each refined by the
+        # whole hierarchy, limb grids over their whole range); the lowest XOR wins.
+        energy = self._energy(masks)
+        pelvis = fit.pose.params[:3].copy()
+        if up is not None:  # standing on the hull's lowest point
+            pelvis += (np.min(points @ up) + self.shape.hip_height - pelvis @ up) * up
+        starts = [self._best_hypothesis(energy, fit.pose.params),
+                  *upright_starts(fit.pose, up, self.config.init_headings, pelvis)]
+        refined = [self._refine_all(energy, p.params.copy(), init=True) for p in starts]
+        scores = [self._objective(energy, x, self.config.final_level) for x in refined]
+        best = int(np.argmin(scores))
+        x = refined[best]
+        if estimate_shape and self.config.init_shape:
+            # People differ in proportions: the segment lengths from the silhouettes'
+            # outlines, with the pose (fixed afterwards: thesis 6.2.4).
+            x = self._refine_shape([masks], [Pose(x)])[0].params
+            x = self._refine_all(self._energy(masks), x, init=True)
+        start = "its fit" if best == 0 else (
+            f"an upright start at {360 * (best - 1) // (len(starts) - 1)} deg from its fit")
+        message = f"init from visual hull ({len(points)} surface voxels; {start})"
         self.history = []
         return Pose(x), message
 
@@ -427,7 +464,7 @@ class SilhouetteTracker:
         best, best_e = x, np.inf
         for start in (x, swap_sides(x, "leg"), swap_sides(x, "arm"),
                       swap_sides(swap_sides(x, "leg"), "arm")):  # fmt: skip
-            y, e, n = refiner.refine(start, np.arange(N_POSE_PARAMS),
+            y, e, n = refiner.refine(self._held_at_zero(start), self._free(),
                                      lambda p: energy(Pose(p), level))  # fmt: skip
             self.evaluations += n
             if e < best_e:
@@ -452,8 +489,19 @@ class SilhouetteTracker:
         self.model, xs, _ = refine_shape(
             self.model, [(e.cameras[level], e.masks[level], e.known[level]) for e in energies],
             [p.params for p in poses], self.renderer, energy,
-            ContourConfig(iterations=iterations))
+            ContourConfig(iterations=iterations), free=self._free())
         return [Pose(x) for x in xs]
+
+    def _free(self) -> np.ndarray:
+        """The parameters refined now: `TrackConfig.free_params`, without the spine's side bend
+        and twist while the start is searched (`_starting`)."""
+        return self.config.free_params(_START_HELD if self._starting else ())
+
+    def _held_at_zero(self, x: np.ndarray) -> np.ndarray:
+        """x with the parameters that are not refined now at 0."""
+        x = np.array(x, float)
+        x[np.setdiff1d(np.arange(N_POSE_PARAMS), self._free())] = 0.0
+        return x
 
     def calibrate_shape(self, sequence: Sequence[Sequence[np.ndarray]],
                         progress: Callable[[], object] | None = None) -> Pose:
@@ -463,9 +511,18 @@ class SilhouetteTracker:
         the segment lengths, which the silhouettes of several poses tell apart better than one.
         Returns the first frame's pose with that shape; the tracker then starts afresh from it
         and its event says how it was found (not "the given pose")."""
-        cfg = self.config
         if self.shape is not None:
             raise ValueError("the shape is already known")
+        starting, self._starting = self._starting, True
+        try:
+            return self._calibrate_shape(sequence, progress)
+        finally:
+            self._starting = starting
+
+    def _calibrate_shape(self, sequence: Sequence[Sequence[np.ndarray]],
+                         progress: Callable[[], object] | None) -> Pose:  # fmt: skip
+        """`calibrate_shape` (the start's parameters held)."""
+        cfg = self.config
         picked: list[tuple[Sequence[np.ndarray], Pose]] = []
         for index, masks in enumerate(sequence):
             result = self.track(index, masks)
@@ -607,6 +664,7 @@ class SilhouetteTracker:
         import cv2
 
         cfg = self.config
+        x = self._held_at_zero(x)
         # Where a view cannot tell (unknown pixels), a joint counts as inside its silhouette.
         def inside(mask: np.ndarray, known: np.ndarray | None) -> np.ndarray:
             grown = cv2.dilate(mask.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
@@ -651,7 +709,9 @@ class SilhouetteTracker:
         for level in sorted({coarse, cfg.search_level}, reverse=True):
             x = self._stage(energy, x, _ROOT, root_steps, level, evals)
             root_steps = root_steps / 2
-        x = self._stage(energy, x, _TRUNK, np.deg2rad([8.0, 8.0]), cfg.search_level, evals)
+        trunk = np.isin(_TRUNK, self._free())
+        x = self._stage(energy, x, np.array(_TRUNK)[trunk], _TRUNK_STEPS[trunk],
+                        cfg.search_level, evals)
         for limb in _LIMBS:
             x = self._limb(energy, x, limb, change, cfg.search_level, wide=init)
         x = self._stage(energy, x, _ROOT, root_steps / 2, cfg.final_level, evals)
@@ -678,7 +738,7 @@ class SilhouetteTracker:
                 ContourConfig(iterations=self.config.contour_iterations),
                 known=energy.known[level]))
         refiner = self._refiner[2]
-        x, _, evaluations = refiner.refine(x, np.arange(N_POSE_PARAMS),
+        x, _, evaluations = refiner.refine(x, self._free(),
                                            lambda y: self._objective(energy, y, level))
         self.evaluations += evaluations
         return x

@@ -9,6 +9,7 @@ import pytest
 from tracking.body.bvh import rotations_to_channels
 from tracking.body.model import (
     JOINT_NAMES,
+    LEGACY_POSE_PARAMS,
     N_POSE_PARAMS,
     NODE_INDEX,
     NODE_NAMES,
@@ -39,13 +40,16 @@ def _joints(**values: float) -> dict[str, np.ndarray]:
 # ------------------------------------------------------------------------- layout and limits
 
 
-def test_layout_has_24_parameters_over_11_joints() -> None:
-    assert len(POSE_LAYOUT) == 24
-    assert len({p.name for p in POSE_LAYOUT}) == 24
+def test_layout_has_the_thesis_24_parameters_then_the_spine_bend_and_twist() -> None:
+    assert len(POSE_LAYOUT) == 26
+    assert len({p.name for p in POSE_LAYOUT}) == 26
     assert {p.joint for p in POSE_LAYOUT} == set(JOINT_NAMES)
     assert len(JOINT_NAMES) == 11
-    dof = {j: sum(p.joint == j for p in POSE_LAYOUT) for j in JOINT_NAMES}
+    thesis = POSE_LAYOUT[:LEGACY_POSE_PARAMS]
+    dof = {j: sum(p.joint == j for p in thesis) for j in JOINT_NAMES}
     assert dof["pelvis"] == 6 and dof["spine"] == 1 and dof["neck"] == 1
+    assert [(p.name, p.joint, p.axis) for p in POSE_LAYOUT[LEGACY_POSE_PARAMS:]] == [
+        ("spine_bend", "spine", (0.0, 0.0, 1.0)), ("spine_twist", "spine", (0.0, 1.0, 0.0))]
     for side in "lr":
         # Each complete limb has four degrees of freedom (3 at the root, 1 at the hinge).
         assert dof[f"{side}_shoulder"] + dof[f"{side}_elbow"] == 4

@@ -18,7 +18,9 @@ from tracking.body.bvh import (
     read_bvh,
 )
 from tracking.body.model import (
+    LEGACY_POSE_PARAMS,
     LIMIT_TOLERANCE_RAD,
+    N_POSE_PARAMS,
     NODE_NAMES,
     PARAM_INDEX,
     BodyShape,
@@ -66,7 +68,8 @@ def test_hand_made_pose_writes_the_expected_channels():
 def test_random_poses_round_trip_exactly():
     rng = np.random.default_rng(0)
     shape = BodyShape.default(1.7)
-    poses = [Pose(np.concatenate([rng.uniform(-1, 1, 3), rng.uniform(-0.6, 0.6, 21)]))
+    poses = [Pose(np.concatenate([rng.uniform(-1, 1, 3),
+                                  rng.uniform(-0.6, 0.6, N_POSE_PARAMS - 3)]))
              for _ in range(20)]  # fmt: skip
     poses = [p.clamped() for p in poses]
     _, back, back_shape = _round_trip(poses, shape)
@@ -155,7 +158,7 @@ def _frames(**rows):
 
 
 def _params(**named):
-    params = [0.0, 0.9, 0.0] + [0.0] * 21
+    params = [0.0, 0.9, 0.0] + [0.0] * (N_POSE_PARAMS - 3)
     for name, value in named.items():
         params[PARAM_INDEX[name]] = value
     return params
@@ -220,6 +223,17 @@ def test_what_writers_produce_is_read(tmp_path):
     assert read.frames[3][1][PARAM_INDEX["r_knee_flex"]] == np.deg2rad(150)
 
 
+def test_a_file_of_the_thesis_24_parameters_reads_with_the_spine_bend_and_twist_0(tmp_path):
+    legacy = _params(spine_flex=0.3)[:LEGACY_POSE_PARAMS]
+    frames = [{"frame": 0, "params": legacy}, {"frame": 1, "params": [float("nan")] * 24}]
+    read = read_pose_file(_pose_file(tmp_path, frames=frames))
+    np.testing.assert_array_equal(read.frames[0][1], legacy + [0.0, 0.0])
+    assert read.frames[1][1] is None
+    frames = [{"frame": 0, "params": legacy[:-1]}]
+    with pytest.raises(UserError, match="has 23 pose parameters, not 26 \\(or the thesis' 24\\)"):
+        read_pose_file(_pose_file(tmp_path, frames=frames))
+
+
 def test_pose_params_problem_names_the_first_bad_parameter():
     ok = np.array(_params())
     assert pose_params_problem(ok) is None
@@ -231,7 +245,7 @@ def test_pose_params_problem_names_the_first_bad_parameter():
     assert pose_params_problem(bad, joint_limits=False) is None
     bad[PARAM_INDEX["root_tx"]] = 2000.0
     assert pose_params_problem(bad, joint_limits=False).startswith("root_tx = 2000 m")
-    assert pose_params_problem(np.zeros(23)) == "23 pose parameters, not 24"
+    assert pose_params_problem(np.zeros(23)) == "23 pose parameters, not 26"
 
 
 def test_zxy_twin_is_the_same_rotation() -> None:

@@ -23,7 +23,7 @@ G = 9.80665
 
 
 def params_over_time(n: int, **series: np.ndarray | float) -> np.ndarray:
-    """(n, 24) pose parameters: the named ones as given (arrays or constants), others 0,
+    """(n, N_POSE_PARAMS) pose parameters: the named ones as given (arrays or constants), others 0,
     pelvis 1 m above the origin."""
     p = np.zeros((n, N_POSE_PARAMS))
     p[:, PARAM_INDEX["root_ty"]] = 1.0

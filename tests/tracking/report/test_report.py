@@ -33,7 +33,8 @@ VELOCITY = np.array([0.1, 0.0, 1.2])  # pelvis, m/s: straight and constant, so f
 
 
 def walking_params(n: int = N) -> np.ndarray:
-    """(n, 24) a gait-like synthetic motion: 1 Hz leg and arm swing, pelvis moving at VELOCITY."""
+    """(n, N_POSE_PARAMS) a gait-like synthetic motion: 1 Hz leg and arm swing, pelvis moving
+    at VELOCITY."""
     t = np.arange(n) / FPS
     swing = np.sin(2 * np.pi * t)
     p = np.zeros((n, N_POSE_PARAMS))

@@ -121,6 +121,9 @@ def test_automatic_start_picks_the_right_legs_and_the_shape():
                                                    shape_stride=1))
     first = tracker.calibrate_shape(sequence)
     assert tracker.shape is not None and tracker.history == []
+    # The start and the shape pass leave the chest's side bend and twist at 0 (`_START_HELD`).
+    assert first.params[PARAM_INDEX["spine_bend"]] == first.params[PARAM_INDEX["spine_twist"]] == 0
+    assert not tracker._starting
     assert abs(tracker.shape.height / truth_shape.height - 1) < 0.03
     got = node_positions_in_world(first, tracker.shape)
     truth = node_positions_in_world(STRIDE, truth_shape)

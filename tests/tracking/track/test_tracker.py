@@ -13,7 +13,9 @@ from recon.cameras import write_cameras_json
 from tests.helpers import recording_entities, run_cli, shared_dataset
 from tracking.body.bvh import read_bvh
 from tracking.body.model import (
+    N_POSE_PARAMS,
     NODE_NAMES,
+    PARAM_INDEX,
     BodyModel,
     BodyShape,
     Pose,
@@ -75,6 +77,30 @@ def test_tracking_follows_a_walk_from_a_given_start(twist_weight):
         errors.append(_mpjpe_mm(result.pose, SHAPE, pose))
         assert result.xor_fraction < 0.1
     assert max(errors) < 30  # 1 px is ~12 mm at 4 m with f = 343 px
+
+
+def test_the_chest_side_bend_and_twist_are_tracked_and_can_be_held():
+    """A chest turning to 23 and bending to 11 degrees over the pelvis in 5 frames: the tracker
+    follows both (issue 19's extra degrees of freedom); held (--hold), they stay 0 and the
+    joints fall behind."""
+    values = {"root_ty": 0.95, "l_shoulder_rz": 0.3, "r_shoulder_rz": -0.3,
+              "l_elbow_flex": 0.4, "r_elbow_flex": 0.4, "spine_flex": 0.1}
+    truth = [Pose.from_dict({**values, "spine_twist": 0.08 * k, "spine_bend": 0.04 * k})
+             for k in range(6)]  # fmt: skip
+    twist, bend = PARAM_INDEX["spine_twist"], PARAM_INDEX["spine_bend"]
+    last = {}
+    for hold in ((), ("spine_bend", "spine_twist")):
+        tracker = SilhouetteTracker(CAMERAS, dataclasses.replace(SUPERQUADRIC, hold=hold),
+                                    shape=SHAPE)  # fmt: skip
+        for frame, pose in enumerate(truth):
+            result = tracker.track(frame, _masks(pose), init=truth[0] if frame == 0 else None)
+            assert result.pose is not None, result.event
+        last[hold] = result.pose
+    free, held = last[()], last[("spine_bend", "spine_twist")]
+    assert abs(free.params[twist] - 0.4) < np.deg2rad(5)
+    assert abs(free.params[bend] - 0.2) < np.deg2rad(5)
+    assert held.params[twist] == 0.0 and held.params[bend] == 0.0
+    assert _mpjpe_mm(free, SHAPE, truth[-1]) < 6 and _mpjpe_mm(held, SHAPE, truth[-1]) > 12
 
 
 def test_refine_finds_the_pose_of_one_frame_from_a_wrong_start():
@@ -195,7 +221,7 @@ def test_cli_synth_then_track_writes_every_output(tmp_path):
     assert np.mean(errors) < 0.04
     pose = json.loads((ws / "tracks" / "pose.json").read_text())
     assert [f["frame"] for f in pose["frames"]] == [0, 1, 2]
-    assert all(len(f["params"]) == 24 for f in pose["frames"])
+    assert all(len(f["params"]) == N_POSE_PARAMS for f in pose["frames"])
     # The first frame says how it was started: from the silhouettes, not from a given pose.
     assert pose["frames"][0]["event"].startswith("init from visual hull")
     assert "segment lengths from the first frames" in pose["frames"][0]["event"]
@@ -254,7 +280,7 @@ def test_cli_track_needs_a_video_workspace(tmp_path):
 
 @pytest.mark.parametrize("flag", [["--contour-level", "3"], ["--shape-stride", "0"],
                                   ["--levels", "0"], ["--max-xor-fraction", "0"],
-                                  ["--init-headings", "-1"]])
+                                  ["--init-headings", "-1"], ["--hold", "l_knee_flex"]])
 def test_cli_track_rejects_bad_settings_in_one_line(tmp_path, flag):
     result = run_cli("track", tmp_path, *flag)
     assert result.returncode == 2 and "Traceback" not in result.stderr
