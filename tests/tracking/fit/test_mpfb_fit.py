@@ -113,10 +113,19 @@ def _real_pose(clip: str, frame: int) -> Pose:
     ("cmu_bend_pickup.bvh", 1915, 1023),
     # Standing with an arm overhead: the 12 best trunk fits were all head down, so the fit
     # was upside down (reported failed, 780 mm off), before both ends of the cloud were tried.
+    # With the chest's bend and twist (session 17) it was accepted with a joint 70 mm off
+    # until accepted fits had their limbs searched again: 3.2 mm, max 5.
     ("cmu_bend_pickup.bvh", 1277, 1021),
     # A hanging arm fitted raised (refused: left arm 385-628 mm off), before a refused limb
     # was searched again with every candidate refined (`repair_limbs`): 3.5 mm, max 8.
     ("cmu_dance.bvh", 449, 1001),
+    # Picking up, the chest bent sideways: the left forearm laid along the thigh and accepted
+    # (wrist 86 mm off, every point on the body; the hand's points are explained by the leg).
+    # Searching an accepted fit's limbs again (session 17) finds a 5 mm fit of lower cost
+    # from the fit's pose, but the fit still ends with the wrist 108 mm off: a known
+    # confident-wrong fit, kept here so that its fix shows.
+    pytest.param("cmu_bend_pickup.bvh", 319, 1018, marks=pytest.mark.xfail(
+        strict=True, reason="accepted with the left wrist 108 mm off (session 17)")),
 ])  # fmt: skip
 def test_mpfb_fit_of_real_clip_poses_once_fitted_wrong(clip, frame, seed):
     pose = _real_pose(clip, frame)
