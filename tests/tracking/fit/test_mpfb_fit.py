@@ -120,12 +120,10 @@ def _real_pose(clip: str, frame: int) -> Pose:
     # was searched again with every candidate refined (`repair_limbs`): 3.5 mm, max 8.
     ("cmu_dance.bvh", 449, 1001),
     # Picking up, the chest bent sideways: the left forearm laid along the thigh and accepted
-    # (wrist 86 mm off, every point on the body; the hand's points are explained by the leg).
-    # Searching an accepted fit's limbs again (session 17) finds a 5 mm fit of lower cost
-    # from the fit's pose, but the fit still ends with the wrist 108 mm off: a known
-    # confident-wrong fit, kept here so that its fix shows.
-    pytest.param("cmu_bend_pickup.bvh", 319, 1018, marks=pytest.mark.xfail(
-        strict=True, reason="accepted with the left wrist 108 mm off (session 17)")),
+    # (wrist 86 mm off, every point on the body; the hand's points are explained by the leg),
+    # before accepted fits had their limbs searched again on up to 4x the fit's points
+    # (session 17; on the fit's 1,500 points that search ended 108 mm off): 5 mm.
+    ("cmu_bend_pickup.bvh", 319, 1018),
 ])  # fmt: skip
 def test_mpfb_fit_of_real_clip_poses_once_fitted_wrong(clip, frame, seed):
     pose = _real_pose(clip, frame)
