@@ -49,7 +49,8 @@ that fails too the frame is reported lost (no joints; never NaN).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -390,11 +391,8 @@ class SilhouetteTracker:
         upright bodies at `init_headings` headings, each refined against the silhouettes. Sets
         the shape when it was unknown."""
         if init is None:
-            starting, self._starting = self._starting, True
-            try:
+            with self._searching_start():
                 return self._initialise_from_hull(masks)
-            finally:
-                self._starting = starting
         if self.shape is None:
             raise ValueError("an initial pose needs the subject's shape")
         message, self._start_event = self._start_event or "init from the given pose", ""
@@ -492,6 +490,15 @@ class SilhouetteTracker:
             ContourConfig(iterations=iterations), free=self._free())
         return [Pose(x) for x in xs]
 
+    @contextmanager
+    def _searching_start(self) -> Iterator[None]:
+        """While the start is searched, `_START_HELD` is held too (`_free`)."""
+        starting, self._starting = self._starting, True
+        try:
+            yield
+        finally:
+            self._starting = starting
+
     def _free(self) -> np.ndarray:
         """The parameters refined now: `TrackConfig.free_params`, without the spine's side bend
         and twist while the start is searched (`_starting`)."""
@@ -513,11 +520,8 @@ class SilhouetteTracker:
         and its event says how it was found (not "the given pose")."""
         if self.shape is not None:
             raise ValueError("the shape is already known")
-        starting, self._starting = self._starting, True
-        try:
+        with self._searching_start():
             return self._calibrate_shape(sequence, progress)
-        finally:
-            self._starting = starting
 
     def _calibrate_shape(self, sequence: Sequence[Sequence[np.ndarray]],
                          progress: Callable[[], object] | None) -> Pose:  # fmt: skip
