@@ -152,6 +152,9 @@ POSE_LAYOUT: tuple[PoseParam, ...] = (
 LEGACY_POSE_PARAMS: int = 24
 """Length of the layout before the spine's side bend and twist were added: pose files of that
 length are read with those two at 0."""
+ADDED_PARAMS: tuple[str, ...] = tuple(p.name for p in POSE_LAYOUT[LEGACY_POSE_PARAMS:])
+"""The parameters beyond the thesis' 24 (the spine's side bend and twist): what the tracker
+holds while it searches its start and what ``--hold`` may hold in a fit."""
 N_POSE_PARAMS: int = len(POSE_LAYOUT)
 PARAM_INDEX: dict[str, int] = {p.name: i for i, p in enumerate(POSE_LAYOUT)}
 LOWER_LIMITS: np.ndarray = np.array([p.lower for p in POSE_LAYOUT])

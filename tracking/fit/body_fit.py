@@ -58,6 +58,7 @@ from scipy.spatial import cKDTree
 from recon.mesh.normals import vertex_normals
 from tracking.body.bvh import rotations_to_channels
 from tracking.body.model import (
+    ADDED_PARAMS,
     LOWER_LIMITS,
     N_POSE_PARAMS,
     NODE_NAMES,
@@ -209,7 +210,7 @@ class FitConfig:
         return np.setdiff1d(np.arange(size), [PARAM_INDEX[name] for name in self.hold])
 
 
-_HOLDABLE = ("spine_bend", "spine_twist")
+_HOLDABLE = ADDED_PARAMS
 """The pose parameters a fit can hold at 0 (`FitConfig.hold`): the searches of the fit never
 move them, so holding them is the thesis' 24 parameters."""
 

@@ -59,6 +59,7 @@ from scipy.optimize import minimize
 from recon.cameras import Camera
 from tracking.body.bvh import rotations_to_channels
 from tracking.body.model import (
+    ADDED_PARAMS,
     LOWER_LIMITS,
     N_POSE_PARAMS,
     NODE_INDEX,
@@ -84,7 +85,7 @@ _ROOT = [PARAM_INDEX[n] for n in ("root_tx", "root_ty", "root_tz", "root_rz", "r
 # The trunk's parameters and the simplex's first steps for them, radians.
 _TRUNK = [PARAM_INDEX[n] for n in ("spine_flex", "neck_flex", "spine_bend", "spine_twist")]
 _TRUNK_STEPS = np.deg2rad([8.0, 8.0, 5.0, 8.0])
-_START_HELD = ("spine_bend", "spine_twist")
+_START_HELD = ADDED_PARAMS
 """Held at 0 while the start is searched (the visual-hull fit, the competing starts, the shape
 pass) and freed for tracking: free there, they cost the Pose2Sim demo 0.734 -> 0.686 median
 IoU (another start won, a worse basin for the whole clip), session 17."""
