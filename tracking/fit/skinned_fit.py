@@ -197,18 +197,22 @@ def refine_skinned(body: str, height_m: float, pose: Pose, points: np.ndarray,
 
 
 def repair_limbs(model: TrackedModel, pose: Pose, points: np.ndarray, config: FitConfig,
-                 limbs: tuple[str, ...]) -> tuple[TrackedModel, Pose]:  # fmt: skip
+                 limbs: tuple[str, ...], thorough: bool = False,
+                 ) -> tuple[TrackedModel, Pose]:  # fmt: skip
     """`model` in `pose` with the `limbs` searched again, every candidate refined rather than
     the best few of the pre-scoring (`search_limbs` with ``refined`` = all), then ICP over
     pose and shape: the second chance of a fit that `tracking.fit.body_fit.acceptance`
     refuses for a limb. Measured on a CMU dance frame (a hanging arm fitted raised): the
     pre-scoring ranked the hanging candidate out of the best three; refined, it has the
-    lowest cost of the 24 (joint error 68 -> 13 mm before the final ICP)."""
+    lowest cost of the 24 (joint error 68 -> 13 mm before the final ICP). thorough: the
+    search of `search_limbs` with ``dense`` = all `points` (the second look at an accepted
+    fit)."""
     problem = SkinnedProblem(model, config.robust_scale * model.shape.height)
     x = problem.start(pose)
     coarse = points[np.random.default_rng(config.seed).choice(
         len(points), min(400, len(points)), replace=False)]
-    x = search_limbs(problem, x, coarse, limbs, exhaustive=True)
+    x = search_limbs(problem, x, coarse, limbs, exhaustive=True,
+                     dense=points if thorough else None)
     x = problem.icp(x, points, config.free(len(x)), rounds=config.body_rounds,
                     steps=_STEPS_PER_ROUND)  # fmt: skip
     return problem.model(x), Pose(x[:N_POSE_PARAMS])

@@ -124,6 +124,12 @@ def _real_pose(clip: str, frame: int) -> Pose:
     # before accepted fits had their limbs searched again on up to 4x the fit's points
     # (session 17; on the fit's 1,500 points that search ended 108 mm off): 5 mm.
     ("cmu_bend_pickup.bvh", 319, 1018),
+    # Stopping from a walk: accepted with the left wrist 121 mm off (forearm twisted and
+    # straighter than it is) and with the right elbow 100 mm off (the upper arm turned into
+    # a mirror configuration), before the second look searched on all the points with more
+    # starts and rounds (`search_limbs` with ``dense``; session 18): 6 and 5 mm.
+    ("cmu_131_01_start_walk_stop.bvh", 198, 1008),
+    ("cmu_131_01_start_walk_stop.bvh", 397, 1009),
 ])  # fmt: skip
 def test_mpfb_fit_of_real_clip_poses_once_fitted_wrong(clip, frame, seed):
     pose = _real_pose(clip, frame)
@@ -221,3 +227,54 @@ def test_a_limb_fitted_elsewhere_is_found_again_by_the_repair():
     ok, problems, _ = acceptance(model, repaired, points, FitConfig())
     assert ok, problems
     assert errors[wrist] < 0.025 and errors.mean() < 0.012, errors
+
+
+@pytest.mark.slow
+@pytest.mark.shared_data
+def test_the_thorough_repair_finds_a_forearm_between_the_candidates():
+    """The second look's search (`repair_limbs` with ``thorough``): from MakeHuman's average
+    subject with the left forearm of a start-walk-stop frame twisted 12 degrees too far and
+    bent 22 instead of 53 degrees (the fit that was accepted 121 mm off), the ordinary
+    search ends elsewhere and passes (measured: wrist 193 mm off); the thorough one, which
+    also starts from the current configuration's twist and hinge turned and chooses on all
+    the points, brings the wrist back (1 mm)."""
+    from tracking.body.model import PARAM_INDEX
+    from tracking.fit.skinned_fit import fitting_model, repair_limbs
+
+    pose = _real_pose("cmu_131_01_start_walk_stop.bvh", 198)
+    points, _ = body_cloud(MISMATCHED, pose, np.random.default_rng(1008))
+    start = fitting_model("mpfb", MISMATCHED.shape.height)
+    wrong = pose.params.copy()
+    for name, degrees in (("l_shoulder_rz", 4.4), ("l_shoulder_rx", 0.1),
+                          ("l_shoulder_ry", -47.2), ("l_elbow_flex", 21.6)):  # fmt: skip
+        wrong[PARAM_INDEX[name]] = np.deg2rad(degrees)
+    wrong = Pose(wrong)
+    truth = MISMATCHED.joints(pose)
+    wrist = NODE_NAMES.index("l_wrist")
+    assert np.linalg.norm(start.joints(wrong)[wrist] - truth[wrist]) > 0.1
+    model, ordinary = repair_limbs(start, wrong, points, FitConfig(), ("l_arm",))
+    assert np.linalg.norm(model.joints(ordinary)[wrist] - truth[wrist]) > 0.05
+    model, thorough = repair_limbs(start, wrong, points, FitConfig(), ("l_arm",), thorough=True)
+    errors = np.linalg.norm(model.joints(thorough) - truth, axis=1)
+    assert errors[wrist] < 0.015 and errors.mean() < 0.010, errors
+
+
+@pytest.mark.slow
+def test_the_second_look_refuses_points_off_the_body_that_no_limb_explains():
+    """`second_look`: a right body passes it; the same body with 12 points (0.3% of the cloud,
+    under the subset test's 1.5%) together 15 cm in front of the chest, which no limb
+    search can explain, is refused rather than reported a success."""
+    from tracking.fit.body_fit import acceptance, second_look
+
+    pose = walking_poses(12, 30.0, MISMATCHED.shape, phase_deg=90.0)[8]
+    points, _ = body_cloud(MISMATCHED, pose, np.random.default_rng(5))
+    chest = MISMATCHED.joints(pose)[NODE_NAMES.index("spine")]
+    front = MISMATCHED.posed_vertices(pose)[:, 2].max() - chest[2]
+    blob = chest + [0.0, 0.1, front + 0.15] + np.random.default_rng(6).normal(0, 0.01, (12, 3))
+    _, _, (ok, problems, _) = second_look(MISMATCHED, pose, points, points, FitConfig())
+    assert ok, problems
+    held = np.vstack([points, blob])
+    assert acceptance(MISMATCHED, pose, held, FitConfig())[0]  # the subset's test passes it
+    _, _, (ok, problems, _) = second_look(MISMATCHED, pose, held, held, FitConfig())
+    assert not ok
+    assert "after the limbs were searched again" in "; ".join(problems)
