@@ -62,8 +62,8 @@ def main() -> None:
     from recon.workspace import Workspace
     from tracking.body.model import Pose
     from tracking.body.motion import read_pose_file
-    from tracking.rig.cameras import read_cameras
     from tracking.silhouettes.hull import hull_silhouettes
+    from tracking.silhouettes.step import tracked_cameras
     from tracking.track.energy import iou, known_iou
     from tracking.track.render import CpuRasterRenderer
     from tracking.track.step import unknown_pixels
@@ -97,7 +97,8 @@ def main() -> None:
             model = create("body", body).model_from_record(track.body, track.shape)
             # The poses are in the rig's upright frame (Y up); the cameras in the world's.
             world_from_upright = track.world_from_upright
-            cameras = read_cameras(ws / "cameras.json")
+            # The cameras as `mocap silhouettes` corrected them, those the tracker used.
+            cameras = tracked_cameras(Workspace(ws))
             render = CpuRasterRenderer(CpuRasterRenderer.Options())
             ious = {c.name: [] for c in cameras}
             plain = {c.name: [] for c in cameras}

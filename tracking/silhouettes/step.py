@@ -6,6 +6,10 @@ Reads a video workspace (`tracking.rig.video`) and writes::
                                               frame index 0-based, one per processed frame
     WS/silhouettes/<camera>/unknown.png       pixels whose background is unknown (255), with
                                               --background-images only, when there are any
+    WS/silhouettes/cameras.json               the cameras the silhouettes agree with: the
+                                              calibration, corrected by silhouette coherence
+                                              (`tracking.silhouettes.coherence`) when other
+                                              frames confirm the correction
     WS/logs/silhouettes.rrd                   cameras, sample frames with their masks,
                                               backgrounds, foreground fraction over frames
     WS/run.json                               step ``silhouettes``: config and summary
@@ -66,7 +70,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from recon.cameras import Camera
+from recon.cameras import Camera, write_cameras_json
 from recon.errors import UserError
 from recon.progress import bar
 from recon.sfm.images import IMAGE_SUFFIXES
@@ -89,6 +93,7 @@ from tracking.rig.video import (
     video_path,
     workspace_cameras,
 )
+from tracking.silhouettes.coherence import CoherenceConfig, CoherenceResult, refine_rig
 from tracking.silhouettes.hull import HullCheckConfig, consistent_silhouettes
 from tracking.silhouettes.subtraction import (
     PHOTO_MISALIGNMENT_PX,
@@ -104,6 +109,8 @@ from tracking.silhouettes.subtraction import (
 )
 
 STEP = "silhouettes"
+CAMERAS_NAME = "cameras.json"
+"""In ``WS/silhouettes``: the cameras the silhouettes agree with (`tracked_cameras`)."""
 UNKNOWN_NAME = "unknown.png"
 """``silhouettes/<camera>/unknown.png``: the camera's pixels whose background is unknown (255),
 left out of the tracking energy and of the silhouette IoU; written only when there are any."""
@@ -191,6 +198,11 @@ class SilhouettesConfig:
         default_factory=HullCheckConfig,
         metadata={"help": "multi-view consistency of the silhouettes (HullCheckConfig flags)"},
     )
+    coherence: CoherenceConfig = field(
+        default_factory=CoherenceConfig,
+        metadata={"help": "the cameras' correction by silhouette coherence (CoherenceConfig "
+                  "flags)"},
+    )  # fmt: skip
 
     def __post_init__(self) -> None:
         if _BACKGROUND_FORMAT.match(self.background) is None:
@@ -632,7 +644,8 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
     fp = fingerprint(STEP, settings, _upstream_fingerprint(ws, cameras),
                      {name: [file_digest(path) for path in paths]
                       for name, paths in plates.items()})
-    outputs = [ws.silhouettes_dir / c.name for c in cameras]
+    outputs = [*(ws.silhouettes_dir / c.name for c in cameras),
+               ws.silhouettes_dir / CAMERAS_NAME]
     if done := ws.reusable(STEP, fp, *outputs, overwrite=overwrite):
         return dataclasses.replace(done, summary={**done.summary, "up_to_date": True})
 
@@ -660,10 +673,19 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
         else:  # one camera after the other in this process
             done = [camera_silhouettes(job, progress) for job in jobs]
         done = [_with_held(result) for result in done]
+        refined = None
+        if config.coherence.refine_cameras and len(cameras) >= 2 and len(frames) >= 2:
+            progress.set_postfix_str("camera correction")
+            refined = _refined_rig(ws, cameras, [job.out for job in jobs], frames, done,
+                                   config.coherence)  # fmt: skip
+            used = refined.cameras
+        else:
+            used = cameras
+        write_cameras_json(tmp / CAMERAS_NAME, used)
         if check:
             progress.set_postfix_str("multi-view check")
             done = _checked_by_hull(map_cameras, _HullJob(
-                root=ws.root.resolve(), cameras=cameras, outs=[job.out for job in jobs],
+                root=ws.root.resolve(), cameras=used, outs=[job.out for job in jobs],
                 frames=frames, config=config.hull), done, progress)
         for camera, result in zip(cameras, done, strict=True):
             if result.background.unknown is not None:
@@ -721,9 +743,42 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
     summary = {"cameras": per_camera, "frames": [config.first, last, config.frame_step],
                "processed": len(frames), "background": background_text,
                "background_frames": background_frames, "multi_view_check": check,
-               "warnings": warnings}
+               "warnings": warnings,
+               **({"camera_correction": refined.summary()} if refined is not None else {})}
     return ws.record_step(STEP, fp, outputs=outputs, config=settings, seconds=timer.seconds,
                           summary=summary)
+
+
+def tracked_cameras(ws: Workspace) -> list[Camera]:
+    """The cameras that go with the workspace's silhouettes: ``silhouettes/cameras.json``, as
+    `mocap silhouettes` corrected them (or kept them), else the calibrated ``cameras.json``
+    (silhouettes `mocap synth` drew with exact cameras); `UserError` when unreadable."""
+    from tracking.rig.cameras import read_cameras
+
+    path = ws.silhouettes_dir / CAMERAS_NAME
+    path = path if path.is_file() else ws.cameras_path
+    try:
+        return read_cameras(path)
+    except ValueError as exc:
+        raise UserError(f"{path}: {exc}") from None
+
+
+def _refined_rig(ws: Workspace, cameras: list[Camera], outs: list[Path], frames: list[int],
+                 done: list[_CameraResult], config: CoherenceConfig,
+                 ) -> CoherenceResult:  # fmt: skip
+    """`tracking.silhouettes.coherence.refine_rig` on ``config.coherence_frames`` of the
+    processed frames spread over them, their masks read from ``outs``, before the multi-view
+    check, which then runs with the corrected cameras. Checked first with the calibrated
+    cameras, the masks are trimmed to fit them wherever the error exceeds the check's
+    tolerance: on the ball rig (tolerance 3 px) a camera 5 px off was found 2 px off; on the
+    Pose2Sim demo (tolerance 19 px) both orders give the same correction within 3 px and the
+    same coherence (1 cm hull: median IoU 0.903 and 0.902)."""
+    picked = sorted({frames[i] for i in np.linspace(0, len(frames) - 1,
+                                                    config.coherence_frames).round().astype(int)})
+    masks = [[cv2.imread(str(out / f"{frame:06d}.png"), cv2.IMREAD_GRAYSCALE) > 127
+              for out in outs] for frame in picked]  # fmt: skip
+    return refine_rig(cameras, masks, [r.background.unknown for r in done], config,
+                      [content_box(ws, camera) for camera in cameras])
 
 
 def _log_camera(rec: Any, ws: Workspace, camera: Camera, result: _CameraResult, masks: Path,
@@ -1141,6 +1196,17 @@ def summary_lines(ws: Workspace, record: StepRecord) -> list[str]:
             line += (f"; photo on {photo['area']:.1%} of the image, background unknown on "
                      f"{photo['unknown']:.1%}")
         lines.append(line)
+    correction = s.get("camera_correction")
+    if correction is not None:
+        shifts = ", ".join(f"{name} ({dx:+.0f}, {dy:+.0f})"
+                           for name, (dx, dy) in correction["shifts_px"].items())
+        before, after = correction["coherence_checked"]
+        lines.append(
+            f"cameras      {'corrected' if correction['accepted'] else 'kept as calibrated'} by "
+            f"silhouette coherence: image shifts {shifts} px; coherence of the checking "
+            f"frames {before:.3f} -> {after:.3f}"
+            + ("" if correction["accepted"] else " (too little to apply)")
+            + f"; {ws.silhouettes_dir / CAMERAS_NAME}")
     lines += [f"warning      {w}" for w in s["warnings"]]
     lines.append(f"recording    {ws.logs_dir / f'{STEP}.rrd'}")
     return lines

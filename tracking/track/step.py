@@ -1,6 +1,7 @@
 """`mocap track WS`: the silhouette tracker over a video workspace's sequence.
 
-Reads ``WS/cameras.json`` and ``WS/silhouettes/<camera>/<frame:06d>.png`` (from `mocap synth`
+Reads the cameras (``WS/silhouettes/cameras.json`` as `mocap silhouettes` corrected them, else
+``WS/cameras.json``) and ``WS/silhouettes/<camera>/<frame:06d>.png`` (from `mocap synth`
 or `mocap silhouettes`) and writes, each atomically:
 
 * ``tracks/joints.csv``: ``frame,joint,x,y,z``, metres, world frame, the joint names of
@@ -118,12 +119,9 @@ def _read_mask(path: Path, camera: Any) -> np.ndarray:
 def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *,
                     overwrite: bool = False, progress: bool = True) -> dict[str, Any]:  # fmt: skip
     """Track the sequence of `ws`; returns the step summary."""
-    from tracking.rig.cameras import read_cameras
+    from tracking.silhouettes.step import tracked_cameras
 
-    try:
-        cameras = read_cameras(ws.cameras_path)
-    except ValueError as exc:
-        raise UserError(str(exc)) from None
+    cameras = tracked_cameras(ws)
     frames = [f for f in silhouette_frames(ws, [c.name for c in cameras])
               if f >= step.first and (step.last is None or f <= step.last)]  # fmt: skip
     if not frames:

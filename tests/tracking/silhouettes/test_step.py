@@ -379,3 +379,42 @@ def test_a_median_that_holds_the_subject_is_found_from_the_coverage() -> None:
     assert not held[:20].any() and not held[:, :50].any()
     assert held_by_median(crossing, fractions) is None
     assert held_by_median(np.zeros((h, w), np.int32), [0.0] * n) is None
+
+
+def test_a_camera_off_its_calibration_is_corrected_by_the_silhouettes(tmp_path: Path):
+    """The ball's rig (silhouettes with the photos) with cam02's calibration 5 px left and 4 px
+    below where it looks: the
+    step finds the image shift that makes the views agree (`tracking.silhouettes.coherence`),
+    writes the corrected cameras beside the silhouettes and runs the multi-view check with
+    them; the tracker reads those (`tracked_cameras`). The exact rig is kept as it is."""
+    from recon.cameras import write_cameras_json
+    from tracking.silhouettes.step import tracked_cameras
+
+    videos, calibration, photos, _ = make_ball_scene(tmp_path / "scene")
+    config = SilhouettesConfig(background_images=photos, plates="cluttered")
+    exact = read_cameras(calibration)
+    record = make_silhouettes(init_video(tmp_path / "exact", videos, calibration), config)
+    assert not record.summary["camera_correction"]["accepted"]
+    off = list(exact)
+    K = off[2].K.copy()
+    K[:2, 2] += (-5.0, 4.0)
+    off[2] = dataclasses.replace(off[2], K=K)
+    write_cameras_json(tmp_path / "off.json", off)
+    ws = init_video(tmp_path / "ws", videos, tmp_path / "off.json")
+    record = make_silhouettes(ws, config)
+    correction = record.summary["camera_correction"]
+    assert correction["accepted"], correction
+    before, after = correction["coherence_checked"]
+    assert after > max(0.99, before + 0.03), correction
+    # Up to what moving the ball explains (all images down together: the ring is level), cam02
+    # goes back by its error, the others stay (measured: cam02 (6, -5), the others within 2 px
+    # of (0, -2)).
+    shifts = np.array([correction["shifts_px"][c.name] for c in exact])
+    common = np.median(shifts[[0, 1, 3]], axis=0)
+    assert np.abs(shifts[[0, 1, 3]] - common).max() <= 2, correction
+    np.testing.assert_allclose(shifts[2] - common, [5.0, -4.0], atol=1.5)
+    used = tracked_cameras(ws)
+    np.testing.assert_allclose(used[2].K[:2, 2], off[2].K[:2, 2] + shifts[2])
+    assert read_cameras(ws.cameras_path)[2] == off[2]  # the calibration itself is kept
+    assert any(line.startswith("cameras      corrected by silhouette coherence")
+               for line in summary_lines(ws, record))
