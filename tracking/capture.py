@@ -201,14 +201,20 @@ def _init_outcome(ws: Workspace, record: dict[str, Any], *, reused: bool) -> Ste
 def _silhouettes_outcome(ws: Workspace, record: StepRecord) -> StepOutcome:
     import numpy as np
 
+    from tracking.silhouettes.step import camera_correction_text
+
     s = record.summary
+    # A correction is news; cameras kept as calibrated are not (`mocap silhouettes` says both).
+    correction = (camera_correction_text(ws, s)
+                  if s.get("camera_correction", {}).get("accepted") else None)  # fmt: skip
     median = float(np.median([c["foreground_fraction"]["median"]
                               for c in s["cameras"].values()]))  # fmt: skip
     return StepOutcome(
         "silhouettes", f"{len(s['cameras'])} cameras x {s['processed']} frames, foreground "
         f"{median:.1%} of the image (median)", str(ws.silhouettes_dir),
         bool(s.get("up_to_date")), record.seconds,
-        tuple(f"warning: {w}" for w in s.get("warnings", [])))
+        (*((f"note: cameras {correction}",) if correction else ()),
+         *(f"warning: {w}" for w in s.get("warnings", []))))
 
 
 def _track_outcome(ws: Workspace, s: dict[str, Any]) -> StepOutcome:

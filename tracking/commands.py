@@ -20,18 +20,21 @@ from recon.errors import UserError
 
 def add_silhouettes_arguments(parser: argparse.ArgumentParser) -> None:
     """The flags of the silhouettes settings (`mocap silhouettes` and `mocap batch`)."""
+    from tracking.silhouettes.coherence import CoherenceConfig
     from tracking.silhouettes.hull import HullCheckConfig
     from tracking.silhouettes.step import SilhouettesConfig
     from tracking.silhouettes.subtraction import SilhouetteConfig
 
-    add_config_arguments(parser, SilhouettesConfig, exclude=("thresholds", "hull"))
+    add_config_arguments(parser, SilhouettesConfig, exclude=("thresholds", "hull", "coherence"))
     add_config_arguments(parser, SilhouetteConfig)
     add_config_arguments(parser, HullCheckConfig)
+    add_config_arguments(parser, CoherenceConfig)
 
 
 def silhouettes_config(args: argparse.Namespace) -> Any:
     """`SilhouettesConfig` from the flags of :func:`add_silhouettes_arguments`, with its nested
-    threshold and multi-view check settings."""
+    threshold, multi-view check and camera correction settings."""
+    from tracking.silhouettes.coherence import CoherenceConfig
     from tracking.silhouettes.hull import HullCheckConfig
     from tracking.silhouettes.step import SilhouettesConfig
     from tracking.silhouettes.subtraction import SilhouetteConfig
@@ -41,7 +44,8 @@ def silhouettes_config(args: argparse.Namespace) -> Any:
     except ValueError as exc:
         raise UserError(str(exc)) from None
     return config_from_args(SilhouettesConfig, args, thresholds=thresholds,
-                            hull=config_from_args(HullCheckConfig, args))
+                            hull=config_from_args(HullCheckConfig, args),
+                            coherence=config_from_args(CoherenceConfig, args))
 
 
 class BodyCommand:

@@ -126,14 +126,18 @@ def shifted(camera: Camera, shift_px: Sequence[float]) -> Camera:
     return dataclasses.replace(camera, K=K)
 
 
-_RAYS_PER_VIEW = 2500
+_RAYS_PER_VIEW = 1200
 """Rays sampled per view and frame, on a regular grid of its (dilated) silhouette's pixels."""
 
-_RAY_STEP_M = 0.015
+_RAY_STEP_M = 0.02
 """Spacing of the samples along a ray, metres (a forearm is 6-8 cm across)."""
 
-_RAY_REACH_M = 1.2
+_RAY_REACH_M = 1.0
 """The samples span this far on either side of where the silhouettes' rays meet, metres."""
+
+
+_CACHED = 600
+"""Cone tests a frame keeps (one per pair of views and shift tried; ~100 kB each)."""
 
 
 class _Frame:
@@ -159,7 +163,7 @@ class _Frame:
         self.pixels: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self.uv: dict[tuple[int, int], np.ndarray] = {}
         self.front: dict[tuple[int, int], np.ndarray] = {}
-        self._inside: dict[tuple[int, int], tuple[tuple[int, int], np.ndarray]] = {}
+        self._inside: dict[tuple[int, int, tuple[int, int]], np.ndarray] = {}
         if len(self.views) < 2:  # nothing to agree on (`coverage` is (0, 0))
             return
         centre = rays_meeting_point([cameras[k] for k in self.views],
@@ -193,9 +197,11 @@ class _Frame:
     def _in_cone(self, i: int, j: int, shift: tuple[int, int]) -> np.ndarray:
         """(rays, samples) bool: the samples of view i's rays inside view j's silhouette cone
         (or unseen by view j, which does not carve them), view j's image moved by shift."""
-        cached = self._inside.get((i, j))
-        if cached is not None and cached[0] == shift:
-            return cached[1]
+        cached = self._inside.get((i, j, shift))
+        if cached is not None:
+            return cached
+        if len(self._inside) > _CACHED:
+            self._inside.clear()
         x0, y0, x1, y1 = self.boxes[j]
         col = np.floor(self.uv[i, j][..., 0] + shift[0])
         row = np.floor(self.uv[i, j][..., 1] + shift[1])
@@ -203,7 +209,7 @@ class _Frame:
             seen = self.front[i, j] & (col >= x0) & (col < x1) & (row >= y0) & (row < y1)
         inside = ~seen
         inside[seen] = self.carving[j][row[seen].astype(np.int64), col[seen].astype(np.int64)]
-        self._inside[i, j] = (shift, inside)
+        self._inside[i, j, shift] = inside
         return inside
 
     def coverage(self, shifts_px: np.ndarray) -> tuple[int, int]:

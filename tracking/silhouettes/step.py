@@ -1165,6 +1165,22 @@ def _warnings(name: str, empty: list[int], border: list[int], processed: int, st
     return out
 
 
+def camera_correction_text(ws: Workspace, summary: dict[str, Any]) -> str | None:
+    """What the step's summary says of the cameras' correction, in one line (None when the
+    step did not try one)."""
+    correction = summary.get("camera_correction")
+    if correction is None:
+        return None
+    shifts = ", ".join(f"{name} ({dx:+.0f}, {dy:+.0f})"
+                       for name, (dx, dy) in correction["shifts_px"].items())
+    before, after = correction["coherence_checked"]
+    return (f"{'corrected' if correction['accepted'] else 'kept as calibrated'} by silhouette "
+            f"coherence: image shifts {shifts} px; coherence of the checking frames "
+            f"{before:.3f} -> {after:.3f}"
+            + ("" if correction["accepted"] else " (too little to apply)")
+            + f"; {ws.silhouettes_dir / CAMERAS_NAME}")
+
+
 def summary_lines(ws: Workspace, record: StepRecord) -> list[str]:
     """What `mocap silhouettes` prints: counts, per-camera fractions, warnings, paths."""
     s = record.summary
@@ -1196,17 +1212,8 @@ def summary_lines(ws: Workspace, record: StepRecord) -> list[str]:
             line += (f"; photo on {photo['area']:.1%} of the image, background unknown on "
                      f"{photo['unknown']:.1%}")
         lines.append(line)
-    correction = s.get("camera_correction")
-    if correction is not None:
-        shifts = ", ".join(f"{name} ({dx:+.0f}, {dy:+.0f})"
-                           for name, (dx, dy) in correction["shifts_px"].items())
-        before, after = correction["coherence_checked"]
-        lines.append(
-            f"cameras      {'corrected' if correction['accepted'] else 'kept as calibrated'} by "
-            f"silhouette coherence: image shifts {shifts} px; coherence of the checking "
-            f"frames {before:.3f} -> {after:.3f}"
-            + ("" if correction["accepted"] else " (too little to apply)")
-            + f"; {ws.silhouettes_dir / CAMERAS_NAME}")
+    if (correction := camera_correction_text(ws, s)) is not None:
+        lines.append(f"cameras      {correction}")
     lines += [f"warning      {w}" for w in s["warnings"]]
     lines.append(f"recording    {ws.logs_dir / f'{STEP}.rrd'}")
     return lines
