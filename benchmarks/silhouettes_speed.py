@@ -7,8 +7,9 @@ every 2nd clip frame), made into a video workspace with `mocap init-video`. The 
 as users run it (`mocap silhouettes WS --overwrite`, defaults: temporal median background,
 the multi-view check), in its own process: decode, background model, classification,
 clean-up, PNG writing, the check, the recording. Its wall time, start-up included, gives
-camera-frames per second. It runs again with ``--no-multi-view-check``; the difference is the
-check's own time, on its own line.
+camera-frames per second. It runs again with ``--no-multi-view-check`` and with
+``--no-refine-cameras`` (the cameras' correction by silhouette coherence, session 18); the
+differences are the check's and the correction's own times, on their own lines.
 
 MOG2: ``cv2.createBackgroundSubtractorMOG2()`` with its defaults, fed every frame of every
 camera's video in order; the time covers decoding and ``apply()``, with no clean-up and no
@@ -52,7 +53,8 @@ def main() -> None:
         units = args.cameras * args.frames
         whole = mocap("silhouettes", str(ws), "--overwrite")
         alone = mocap("silhouettes", str(ws), "--overwrite", "--no-multi-view-check",
-                      echo=False)
+                      echo=False)  # fmt: skip
+        fixed = mocap("silhouettes", str(ws), "--overwrite", "--no-refine-cameras", echo=False)
         videos = sorted((ws / "videos").iterdir())
         start = time.perf_counter()
         for video in videos:
@@ -70,6 +72,8 @@ def main() -> None:
     for name, seconds in (("mocap silhouettes (defaults)", whole),
                           ("  without the multi-view check", alone),
                           ("  the multi-view check alone", whole - alone),
+                          ("  without the camera correction", fixed),
+                          ("  the camera correction alone", whole - fixed),
                           ("MOG2 (decode + apply, no clean-up)", mog2)):  # fmt: skip
         rate = units / seconds if seconds > 0 else float("inf")
         print(f"{name:<40}{seconds:>9.2f}{rate:>17.1f}")
