@@ -687,7 +687,7 @@ def make_silhouettes(ws: Workspace, config: SilhouettesConfig, *, overwrite: boo
             done = _checked_by_hull(map_cameras, _HullJob(
                 root=ws.root.resolve(), cameras=used, outs=[job.out for job in jobs],
                 frames=frames, config=config.hull), done, progress)
-        for camera, result in zip(cameras, done, strict=True):
+        for camera, result in zip(used, done, strict=True):  # the recording shows the cameras used
             if result.background.unknown is not None:
                 _write_mask(tmp / camera.name / UNKNOWN_NAME, result.background.unknown)
             _log_camera(rec, ws, camera, result, tmp / camera.name, sorted(logged), frames,
