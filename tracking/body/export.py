@@ -12,7 +12,7 @@ from typing import Any
 
 from recon.errors import UserError
 from recon.workspace import atomic_output, write_json_atomic
-from tracking.body.bvh import CMU_METRES_PER_UNIT, read_bvh
+from tracking.body.bvh import read_bvh
 from tracking.body.model import BodyModel, node_positions_in_world
 from tracking.body.retarget import retarget
 
@@ -22,9 +22,10 @@ class BodyExportConfig:
     bvh: Path = field(metadata={"help": "BVH clip to read"})
     frame: int = field(default=0, metadata={"help": "frame index (0-based)"})
     out: Path = field(default=Path("workspaces/body"), metadata={"help": "output folder"})
-    metres_per_unit: float = field(
-        default=CMU_METRES_PER_UNIT,
-        metadata={"help": "BVH length unit in metres (CMU clips: 0.0254/0.45)"},
+    metres_per_unit: float | None = field(
+        default=None,
+        metadata={"help": "BVH length unit in metres (default: its naming's; CMU: 0.0254/0.45, "
+                  "Daz-style: 0.01)"},
     )
 
 

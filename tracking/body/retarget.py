@@ -12,6 +12,10 @@ Two steps:
    the corresponding BVH joints; `retarget` runs it over the frames, warm-starting every frame
    from the previous one. Residuals are RMS distances over the fitted nodes, in metres.
 
+Three namings of the CMU skeleton are read (`NAMINGS`): the CMU BVH export's, the ASF bone
+names' (`CMU_ASF_TO_BODY`) and the Daz-style one's (`DAZ_TO_BODY`), each with its length
+unit (`bvh_metres_per_unit`).
+
 Correspondence (`CMU_TO_BODY`; "A+B" means the midpoint of joints A and B):
 
 * pelvis     LeftUpLeg+RightUpLeg  our pelvis joint is defined as the midpoint of the hip joints;
@@ -25,7 +29,7 @@ Correspondence (`CMU_TO_BODY`; "A+B" means the midpoint of joints A and B):
 * head_top   Head_end              when the End Site has zero length (as in the CMU clips
                                    converted to BVH, which lost the head bone), the head top is
                                    extrapolated from Head along Neck1->Head by that bone's length
-                                   (`_HEAD_EXTENSION`); see `cmu_node_positions`.
+                                   (`BvhNaming.head_extension`); see `cmu_node_positions`.
 * l/r_shoulder  Left/RightArm      glenohumeral joint (Left/RightShoulder are clavicle roots).
 * l/r_elbow     Left/RightForeArm
 * l/r_wrist     Left/RightHand
@@ -48,7 +52,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 from scipy.optimize import least_squares
 
-from tracking.body.bvh import Motion, rotations_to_channels
+from tracking.body.bvh import CMU_METRES_PER_UNIT, Motion, rotations_to_channels
 from tracking.body.bvh import forward_kinematics as bvh_forward_kinematics
 from tracking.body.model import (
     LOWER_LIMITS,
@@ -100,27 +104,81 @@ CMU_ASF_TO_BODY: dict[str, str] = {
     "l_ankle": "LeftAnkle",
     "r_ankle": "RightAnkle",
 }
-# Per naming: the node map, the joint below the head (for a zero-length Head_end), and each
-# side's ankle and toe-tip joints (for the floor and foot length).
-_NAMINGS: tuple[tuple[dict[str, str], str, str, str], ...] = (
-    (CMU_TO_BODY, "Neck1", "{side}Foot", "{side}ToeBase_end"),
-    (CMU_ASF_TO_BODY, "Neck", "{side}Ankle", "{side}Toe_end"),
+DAZ_TO_BODY: dict[str, str] = {
+    "pelvis": "lThigh+rThigh",
+    "spine": "abdomen",
+    "neck": "neck",
+    "head_top": "head_end",
+    "l_shoulder": "lShldr",
+    "r_shoulder": "rShldr",
+    "l_elbow": "lForeArm",
+    "r_elbow": "rForeArm",
+    "l_wrist": "lHand",
+    "r_wrist": "rHand",
+    "l_hip": "lThigh",
+    "r_hip": "rThigh",
+    "l_knee": "lShin",
+    "r_knee": "rShin",
+    "l_ankle": "lFoot",
+    "r_ankle": "rFoot",
+}
+"""The same points in the Daz-style conversion of the CMU clips (hip, abdomen, chest, neck, head,
+lCollar, lShldr, ..., lButtock, lThigh, lShin, lFoot; the shared data's kick, sit-stand and
+climb): lShldr/lForeArm/lHand and lThigh/lShin/lFoot start the upper arm/forearm/hand and
+thigh/shank/foot bones, abdomen is the waist joint and neck sits about 5 cm above the shoulder
+line. The head has no End Site (only the eyes'): its top is extrapolated (`BvhNaming`)."""
+
+
+@dataclass(frozen=True)
+class BvhNaming:
+    """How one BVH naming of the CMU skeleton gives our nodes.
+
+    nodes: node name -> BVH joint ("A+B": the midpoint); below_head: the joint below the head;
+    ankle, toe_tip: each side's ankle and toe-tip joints ("{side}" in `sides`), for the floor
+    and the foot length; head_extension: when the head top's End Site is absent or has zero
+    length, head top = head + head_extension * (head - below_head); metres_per_unit: the
+    clips' length unit."""
+
+    nodes: dict[str, str]
+    below_head: str
+    ankle: str
+    toe_tip: str
+    sides: tuple[str, str]
+    head_extension: float
+    metres_per_unit: float
+
+
+NAMINGS: tuple[BvhNaming, ...] = (
+    BvhNaming(CMU_TO_BODY, "Neck1", "{side}Foot", "{side}ToeBase_end", ("Left", "Right"),
+              1.0, CMU_METRES_PER_UNIT),
+    BvhNaming(CMU_ASF_TO_BODY, "Neck", "{side}Ankle", "{side}Toe_end", ("Left", "Right"),
+              1.0, CMU_METRES_PER_UNIT),
+    # Daz: head - neck is 7 cm, and the neck joint 5 cm above the shoulders; 1.8 puts the
+    # head top 20 cm above the neck joint (CMU walk: 26 cm above Neck1; an adult's ear-to-
+    # vertex is 13 cm). The clips are in centimetres: 0.01 gives the kick's subject a
+    # sole-to-eye span of 1.46 m.
+    BvhNaming(DAZ_TO_BODY, "neck", "{side}Foot", "{side}Foot_end", ("l", "r"), 1.8, 0.01),
 )
+"""The namings `retarget` reads, tried in this order."""
 
 
-def cmu_naming(motion: Motion) -> tuple[dict[str, str], str, str, str]:
-    """The CMU naming `motion` uses (see `_NAMINGS`); ValueError when it is neither."""
+def cmu_naming(motion: Motion) -> BvhNaming:
+    """The naming `motion` uses (see `NAMINGS`); ValueError when it is none of them."""
     names = set(motion.joint_names)
-    for naming in _NAMINGS:
-        needed = {p for spec in naming[0].values() for p in spec.split("+")}
+    for naming in NAMINGS:
+        needed = {p for spec in naming.nodes.values() for p in spec.split("+")}
+        needed.discard(naming.nodes["head_top"])  # extrapolated when absent
         if needed <= names:
             return naming
     missing = sorted({p for spec in CMU_TO_BODY.values() for p in spec.split("+")} - names)
     raise ValueError(f"not a CMU skeleton (no joint {', '.join(missing[:3])}, ...)")
 
 
-# Head top = Head + _HEAD_EXTENSION * (Head - Neck1) when Head_end has a zero-length offset.
-_HEAD_EXTENSION: float = 1.0
+def bvh_metres_per_unit(motion: Motion) -> float:
+    """The length unit, in metres, of `motion`'s naming (CMU: 0.0254/0.45, Daz-style: 0.01)."""
+    return cmu_naming(motion).metres_per_unit
+
+
 _GIRTHS: tuple[str, ...] = (
     "pelvis_half_width", "trunk_half_depth", "chest_half_width", "head_half_width",
     "upper_arm_radius", "forearm_radius", "thigh_radius", "shank_radius",
@@ -133,18 +191,18 @@ def cmu_node_positions(motion: Motion, metres_per_unit: float) -> dict[str, np.n
     """Node name -> (F, 3) world positions in metres of the CMU points of `CMU_TO_BODY`."""
     pos = np.asarray(bvh_forward_kinematics(motion, scale=metres_per_unit))
     names = motion.joint_names
-    mapping, below_head, _, _ = cmu_naming(motion)
+    naming = cmu_naming(motion)
 
     def joint(name: str) -> np.ndarray:
-        if name == "Head_end":
-            end = motion.joints[motion.joint_index(name)]
-            if np.linalg.norm(end.offset) == 0.0:
-                head, neck1 = pos[:, names.index("Head")], pos[:, names.index(below_head)]
-                return head + _HEAD_EXTENSION * (head - neck1)
+        if name == naming.nodes["head_top"] and (name not in names or np.linalg.norm(
+                motion.joints[motion.joint_index(name)].offset) == 0.0):
+            head = pos[:, names.index(name.removesuffix("_end"))]
+            below = pos[:, names.index(naming.below_head)]
+            return head + naming.head_extension * (head - below)
         return pos[:, names.index(name)]
 
     out = {}
-    for node, spec in mapping.items():
+    for node, spec in naming.nodes.items():
         parts = spec.split("+")
         out[node] = np.mean([joint(p) for p in parts], axis=0)
     return out
@@ -172,8 +230,8 @@ def shape_from_motion(motion: Motion, metres_per_unit: float) -> BodyShape:
         return 0.5 * (_median_distance(p["l_" + a], p["l_" + b])
                       + _median_distance(p["r_" + a], p["r_" + b]))  # fmt: skip
 
-    _, _, ankle, toe_tip = cmu_naming(motion)
-    sides = ("Left", "Right")
+    naming = cmu_naming(motion)
+    ankle, toe_tip, sides = naming.ankle, naming.toe_tip, naming.sides
     floor = min(pos[:, names.index(toe_tip.format(side=s)), 1].min() for s in sides)
     ankle_height = float(min(p["l_ankle"][:, 1].min(), p["r_ankle"][:, 1].min()) - floor)
     toe = 0.5 * sum(_median_distance(pos[:, names.index(ankle.format(side=s))],
@@ -316,10 +374,13 @@ class RetargetResult:
 
 
 def retarget(
-    motion: Motion, metres_per_unit: float, frames: Sequence[int] | None = None
+    motion: Motion, metres_per_unit: float | None = None, frames: Sequence[int] | None = None
 ) -> RetargetResult:
     """Fit our model to every frame in `frames` (default all), warm-starting from the previous
-    fitted frame (cold start for the first)."""
+    fitted frame (cold start for the first). metres_per_unit: the clip's length unit (default
+    its naming's, `bvh_metres_per_unit`)."""
+    if metres_per_unit is None:
+        metres_per_unit = bvh_metres_per_unit(motion)
     shape = shape_from_motion(motion, metres_per_unit)
     pos = cmu_node_positions(motion, metres_per_unit)
     idx = np.arange(motion.num_frames) if frames is None else np.asarray(list(frames), int)

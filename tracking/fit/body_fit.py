@@ -26,7 +26,8 @@ Initialisation is automatic (no hand alignment, unlike the thesis), coarse to fi
    neighbour had taken;
 4. full ICP over all 28 unknowns (the coarse pass before it without the spine's side bend and
    twist) on all points, keeping the lowest-cost orientation; while the
-   best fit fails the acceptance test below, further orientations are tried;
+   best fit fails the acceptance test below, further orientations are tried, and when none
+   passes, the judged fit of the lowest cost is reported, failed;
 5. with a skinned ``--body``, a refined fit that fails the test for a limb alone (its median
    residual passes) gets a second chance: the limbs the cloud does not support (all four when
    only the unexplained points tell) are searched again with every candidate refined
@@ -98,9 +99,21 @@ _TRUNK_NODES = [NODE_NAMES.index(n) for n in ("pelvis", "spine", "neck")]
 # Candidate limb configurations, degrees, in each limb's parameter order (rz, rx, ry, hinge);
 # rz is the left-side abduction, mirrored for the right. A grid over the ball joint's two swing
 # angles, with the hinge straight and bent.
+# The grid's twist is 0, and its flexion stops at -90 (forward): arms raised sideways with the
+# forearm turned (abduction 90-135 degrees, twist +-60), and arms raised forward overhead
+# (flexion -135 to -180), are starts of their own. Without them, three CMU frames of arms
+# overhead and a cartwheel (true arms: abduction 104-131 with twist 68-90, or flexion -159 to
+# -170) were refused with every joint 100-540 mm off; with them, they fit to 2-3 mm.
 _ARM_CANDIDATES = tuple(
     (abd, flex, 0, elbow) for abd in (0, 45, 90, 135) for flex in (0, -45, -90)
     for elbow in (0, 90)
+) + tuple(
+    (abd, flex, twist, elbow) for abd in (90, 135) for flex in (0, -45) for twist in (-60, 60)
+    for elbow in (45, 100)
+) + tuple(
+    (abd, flex, twist, 30) for abd in (0, 45) for flex in (-135, -180) for twist in (-60, 0, 60)
+) + tuple(
+    (abd, flex, 0, 0) for abd in (0, 45) for flex in (-135, -180)
 )  # fmt: skip
 _LEG_CANDIDATES = tuple(
     (abd, flex, 0, knee) for abd in (0, 30) for flex in (15, -30, -60, -90) for knee in (0, 70)
@@ -726,7 +739,7 @@ def fit_body(points: np.ndarray, config: FitConfig | None = None,
     # are judged (refined on `config.body` when it is not the superquadrics, then the
     # acceptance test) in order of cost, `config.judged` at least; while none is accepted,
     # the next orientations are tried, up to `max_orientations`. The accepted fit of the
-    # lowest cost of the judged model wins, else the lowest-cost fit, reported failed.
+    # lowest cost of the judged model wins, else the judged fit of the lowest cost, failed.
     judged: dict[bytes, tuple] = {}
 
     def judge(x: np.ndarray) -> tuple:
@@ -770,9 +783,13 @@ def fit_body(points: np.ndarray, config: FitConfig | None = None,
         if tried >= config.orientations:
             judge(x)  # none accepted so far: this orientation's fit is judged at any cost
     assert fits
-    passed = [v for v in verdicts(fits) if v[0]]
-    verdict = (min(passed, key=lambda v: v[3]) if passed
-               else judge(min(fits, key=lambda item: item[0])[1]))  # fmt: skip
+    # The accepted fit of the lowest cost wins; when none is accepted, the failed fit reported
+    # is the judged one of the lowest cost too (on a skinned body, its mesh's). Ranked on the
+    # superquadrics instead, a CMU arms-overhead frame was reported upside down (every joint
+    # 100-450 mm off), where its upright fit, refused for one forearm, had the lower cost.
+    judge(min(fits, key=lambda item: item[0])[1])
+    tried = verdicts(fits)
+    verdict = min([v for v in tried if v[0]] or tried, key=lambda v: v[3])
     ok, problems, (pose, model, median, rms, inliers, model_to_cloud), _ = verdict
     message = "; ".join((["ok"] if ok else []) + problems)
     return FitResult(pose, model.shape, ok, message, median, rms, inliers, len(points),

@@ -70,7 +70,7 @@ from recon.workspace import (
     fingerprint,
     write_json_atomic,
 )
-from tracking.body.bvh import CMU_METRES_PER_UNIT, Motion, leading_reference_frames, read_bvh
+from tracking.body.bvh import Motion, leading_reference_frames, read_bvh
 from tracking.body.model import BONES, NODE_NAMES, BodyShape, Pose
 from tracking.rig.cameras import ring_cameras
 from tracking.rig.synth_video import RENDER_DIR, VIDEO_SUFFIX, SyntheticVideos
@@ -96,9 +96,10 @@ class SynthConfig:
 
     bvh: Path = field(metadata={"help": "BVH clip that drives the body model (a CMU skeleton "
                                 "is retargeted; a body-model BVH is read as it is)"})
-    metres_per_unit: float = field(
-        default=CMU_METRES_PER_UNIT,
-        metadata={"help": "length unit of a CMU-skeleton BVH in metres (CMU: 0.0254/0.45)"})
+    metres_per_unit: float | None = field(
+        default=None,
+        metadata={"help": "length unit of a CMU-skeleton BVH in metres (default: its naming's; "
+                  "CMU: 0.0254/0.45, Daz-style: 0.01)"})
     cameras: int = field(default=4, metadata={"help": "number of cameras on the ring"})
     size: str = field(default="640x480", metadata={"help": "image size WIDTHxHEIGHT in pixels",
                                                    "metavar": "WxH"})
@@ -263,7 +264,7 @@ def _check_config(config: SynthConfig) -> None:
         raise UserError(f"--fov {config.fov_deg}: expected 1..170 degrees")
     if config.radius_m is not None and not config.radius_m > 0:
         raise UserError(f"--radius {config.radius_m}: must be positive")
-    if not config.fps > 0 or not config.metres_per_unit > 0:
+    if not config.fps > 0 or not (config.metres_per_unit is None or config.metres_per_unit > 0):
         raise UserError("--fps and --metres-per-unit must be positive")
     negative = [f.name for f in dataclasses.fields(config)
                 if f.name in ("jitter_px", "jitter_scale_px", "holes", "hole_radius_m",

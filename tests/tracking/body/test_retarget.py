@@ -165,7 +165,22 @@ def test_the_asf_named_cmu_clip_retargets_too():
 
     clip_path = shared_dataset("mocap_bvh") / "cmu_131_01_start_walk_stop.bvh"
     clip = read_bvh(clip_path)
-    assert cmu_naming(clip)[0] is CMU_ASF_TO_BODY
+    assert cmu_naming(clip).nodes is CMU_ASF_TO_BODY
     result = retarget(clip, CMU_METRES_PER_UNIT, frames=range(0, clip.num_frames, 50))
     assert 1.4 < result.shape.height < 1.9
     assert result.summary["mean_residual_mm"] < 25
+
+
+@pytest.mark.shared_data
+@pytest.mark.parametrize("name", ["cmu_kick", "cmu_sit_stand"])
+def test_the_daz_named_clips_retarget_in_their_own_unit(name):
+    from tracking.body.retarget import DAZ_TO_BODY, bvh_metres_per_unit, cmu_naming
+
+    clip = read_bvh(shared_dataset("mocap_bvh") / f"{name}.bvh")
+    assert cmu_naming(clip).nodes is DAZ_TO_BODY
+    assert bvh_metres_per_unit(clip) == 0.01
+    result = retarget(clip, frames=range(1, clip.num_frames, 100))  # the naming's unit
+    assert 1.4 < result.shape.height < 1.9
+    assert result.summary["mean_residual_mm"] < 30
+    # The head top is extrapolated above the neck, along the head.
+    assert 0.15 < result.shape.neck_to_head_top < 0.3
