@@ -30,8 +30,6 @@ Conventions (the same as COLMAP and OpenCV; see also :mod:`recon.cameras`):
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,6 +37,7 @@ import cv2
 import numpy as np
 
 from recon.cameras import Camera, look_at, write_cameras_json
+from recon.workspace import atomic_output
 
 # Room extent in metres: x in [-3.5, 3.5], y in [-3, 3], z in [0, 2.8].
 ROOM_MIN = np.array([-3.5, -3.0, 0.0])
@@ -526,14 +525,8 @@ def render_scene(config: SyntheticSceneConfig) -> SyntheticScene:
 
 
 def _write_bytes_atomic(path: Path, data: bytes) -> None:
-    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp_name, path)
-    except BaseException:
-        Path(tmp_name).unlink(missing_ok=True)
-        raise
+    with atomic_output(path) as tmp:
+        tmp.write_bytes(data)
 
 
 def write_scene(scene: SyntheticScene, images_dir: Path, truth_path: Path) -> None:
