@@ -949,8 +949,12 @@ def _angle_table(angles: dict[str, Any], shown: dict[str, tuple[str, ...]]) -> s
 
 def _hinge_note() -> str:
     """Which joints of the body model turn about fewer than three axes, and about which."""
-    partial = [(j, a) for j, a in MODEL_ANGLES.items() if len(a) < len(ANGLE_NAMES)]
-    return ", ".join(f"{html.escape(j)} {' and '.join(a)} only" for j, a in partial)
+    groups: dict[tuple[str, ...], list[str]] = {}
+    for joint, angles in MODEL_ANGLES.items():
+        if len(angles) < len(ANGLE_NAMES):
+            groups.setdefault(angles, []).append(joint)
+    return "; ".join(f"{', '.join(joints)}: {' and '.join(angles)} only"
+                     for angles, joints in groups.items())  # fmt: skip
 
 
 def _marker_note(opensim: dict[str, Any]) -> str:

@@ -289,6 +289,38 @@ def test_index_html_stands_alone_with_its_plots_embedded(workspace_report, tmp_p
         assert base64.b64decode(payload) == (report / f"{name}.png").read_bytes()
 
 
+BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable", "chrome",
+            "chrome-headless-shell")  # fmt: skip
+
+
+@pytest.mark.slow
+def test_index_html_alone_shows_its_plots_in_a_headless_browser(workspace_report,
+                                                                tmp_path) -> None:  # fmt: skip
+    """The page copied alone into an empty folder, screenshotted by a headless Chromium at 100%:
+    the curves' colours are on screen, which a broken image (the page before issue 21) lacks."""
+    from PIL import Image
+
+    browser = next((path for name in BROWSERS if (path := shutil.which(name))), None)
+    if browser is None:
+        pytest.skip(f"no headless browser on PATH ({', '.join(BROWSERS)}): the page is not "
+                    "screenshotted (apt-get install chromium)")
+    ws, _ = workspace_report
+    page = tmp_path / "alone" / "index.html"
+    page.parent.mkdir()
+    shutil.copy(ws / "report" / "index.html", page)
+    shot = tmp_path / "shot.png"
+    subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+                    "--force-device-scale-factor=1", "--window-size=1280,9000",
+                    f"--screenshot={shot}", page.as_uri()],
+                   capture_output=True, timeout=180, check=True)  # fmt: skip
+    image = np.asarray(Image.open(shot).convert("RGB"), dtype=int)
+    assert image.shape[1] == 1280
+    # matplotlib's tab:blue (left side) and tab:red (right side), drawn only in the plots.
+    for rgb in ((31, 119, 180), (214, 39, 40)):
+        pixels = int((np.abs(image - rgb).sum(axis=-1) < 40).sum())
+        assert pixels > 3000, (rgb, pixels)
+
+
 def test_angle_table_leaves_out_what_the_model_cannot_move(workspace_report) -> None:
     """Hinges (neck, elbows, knees) get one grey cell, not abduction and rotation columns of
     zeros; the other joints keep all six numbers."""
