@@ -28,6 +28,7 @@ import os
 import platform
 import re
 import shutil
+import stat
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -197,19 +198,28 @@ def set_output_modes(path: Path) -> None:
 
     Writers that go through `tempfile` (``mkstemp``, ``mkdtemp``) create 0600 / 0700 on
     purpose; renamed into place, such a file would be the one output others cannot read
-    (issue 21: ``tracks/motion.bvh`` was 0600 while the rest was 0644). Symbolic links are
-    left alone (their mode is not theirs)."""
+    (issue 21: ``tracks/motion.bvh`` was 0600 while the rest was 0644). Symbolic links and
+    hard-linked files (more than one link: the photos and videos a workspace links to its
+    sources) are left alone: their mode is their source's, which is only read.
+    """
     file_mode, folder_mode = output_mode(), output_mode(folder=True)
-    paths = [path]
-    if path.is_dir() and not path.is_symlink():
-        paths += list(path.rglob("*"))
-    for item in paths:
-        if item.is_symlink():
-            continue
-        st = item.stat()
-        wanted = folder_mode if item.is_dir() else file_mode
-        if (st.st_mode & 0o777) != wanted:
+
+    def settle(item: str, wanted: int) -> None:
+        st = os.lstat(item)
+        if stat.S_ISLNK(st.st_mode) or (not stat.S_ISDIR(st.st_mode) and st.st_nlink > 1):
+            return
+        if stat.S_IMODE(st.st_mode) != wanted:
             os.chmod(item, wanted)
+
+    if not path.is_dir() or path.is_symlink():
+        settle(str(path), file_mode)
+        return
+    settle(str(path), folder_mode)
+    for folder, dirs, files in os.walk(path):  # symbolic links to folders are not followed
+        for name in dirs:
+            settle(os.path.join(folder, name), folder_mode)
+        for name in files:
+            settle(os.path.join(folder, name), file_mode)
 
 
 @contextlib.contextmanager

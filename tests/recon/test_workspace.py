@@ -161,6 +161,20 @@ def test_atomic_output_gives_every_output_the_mode_of_a_new_file(tmp_path, umask
                      "model/sub/points.bin": 0o644}
 
 
+def test_atomic_output_leaves_linked_sources_modes_alone(tmp_path, umask_022):
+    """A folder output that hard-links its sources (WS/images, WS/videos) must not chmod them:
+    a hard link shares its mode with the user's own file."""
+    source = tmp_path / "photo.jpg"
+    source.write_bytes(b"jpeg")
+    os.chmod(source, 0o600)
+    with atomic_output(tmp_path / "images") as tmp:
+        tmp.mkdir()
+        os.link(source, tmp / "photo.jpg")
+        os.symlink(source, tmp / "alias.jpg")
+    assert stat.S_IMODE(source.stat().st_mode) == 0o600
+    assert stat.S_IMODE((tmp_path / "images").stat().st_mode) == 0o755
+
+
 def test_atomic_output_modes_respect_a_stricter_umask(tmp_path):
     old = os.umask(0o077)
     try:
