@@ -30,6 +30,8 @@ Conventions (the same as COLMAP and OpenCV; see also :mod:`recon.cameras`):
 from __future__ import annotations
 
 import math
+import os
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,7 +39,7 @@ import cv2
 import numpy as np
 
 from recon.cameras import Camera, look_at, write_cameras_json
-from recon.workspace import atomic_output
+from recon.workspace import output_mode
 
 # Room extent in metres: x in [-3.5, 3.5], y in [-3, 3], z in [0, 2.8].
 ROOM_MIN = np.array([-3.5, -3.0, 0.0])
@@ -525,8 +527,18 @@ def render_scene(config: SyntheticSceneConfig) -> SyntheticScene:
 
 
 def _write_bytes_atomic(path: Path, data: bytes) -> None:
-    with atomic_output(path) as tmp:
-        tmp.write_bytes(data)
+    # A hidden temporary (not `atomic_output`'s ``.partial`` sibling): the folder is a photo
+    # folder, whose scan skips hidden files, so a killed run leaves no photo behind. mkstemp
+    # makes it 0600; it gets the mode of any new file before it takes the photo's name.
+    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.chmod(tmp_name, output_mode())
+        os.replace(tmp_name, path)
+    except BaseException:
+        Path(tmp_name).unlink(missing_ok=True)
+        raise
 
 
 def write_scene(scene: SyntheticScene, images_dir: Path, truth_path: Path) -> None:
