@@ -8,12 +8,13 @@ scaling and inverse kinematics use the markers whose names the TRC shares with t
 others are ignored). Its default pose model, HALPE_26, names them ``Hip`` (midpoint of the hip
 joints), ``LHip``/``RHip``, ``LKnee``/``RKnee``, ``LAnkle``/``RAnkle``, ``Neck``, ``Head`` (top
 of the head), ``LShoulder``/``RShoulder``, ``LElbow``/``RElbow``, ``LWrist``/``RWrist``, plus
-``Nose``, ``LBigToe``, ``LSmallToe``, ``LHeel`` and the right ones. The other sets use the same
-names for the same joints (COCO_17 lacks ``Hip`` and ``Head``), so `POSE2SIM_MARKER_OF_NODE`
-fits all of them. Our joints map one to one (`tracking.body.model.NODE_NAMES`); our ``spine``
-(the waist joint) has no Pose2Sim counterpart and is left out of a Pose2Sim TRC; Pose2Sim's
-nose, toe and heel markers have none of ours (the body model ends at the ankles and the top of
-the head) and are absent, so the feet's orientation is not constrained by the file.
+``Nose``, ``LBigToe``, ``LSmallToe``, ``LHeel`` and the right ones (names checked against
+pose2sim 0.10.49). The other sets use the same names for the same joints (BODY_25B lacks
+``Hip``, COCO_17 ``Hip`` and ``Head``), so `POSE2SIM_MARKER_OF_NODE` fits all of them. Our
+joints map one to one (`tracking.body.model.NODE_NAMES`); our ``spine`` (the waist joint) has
+no Pose2Sim counterpart and is left out of a Pose2Sim TRC; Pose2Sim's nose, toe and heel
+markers have none of ours (the body model ends at the ankles and the top of the head) and are
+absent, so the feet's orientation is not constrained by the file.
 
 Rates. A BVH stores its frame time rounded (CMU: ``0.008333`` s, whose inverse is 120.0048
 Hz), and that rate reaches the report. The files carry the nominal rate (`nominal_rate_hz`:
