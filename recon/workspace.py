@@ -209,7 +209,9 @@ def set_output_modes(path: Path) -> None:
         if stat.S_ISLNK(st.st_mode) or (not stat.S_ISDIR(st.st_mode) and st.st_nlink > 1):
             return
         if stat.S_IMODE(st.st_mode) != wanted:
-            os.chmod(item, wanted)
+            # A mode that cannot be set (a file of another user) is no reason to lose the output.
+            with contextlib.suppress(PermissionError):
+                os.chmod(item, wanted)
 
     if not path.is_dir() or path.is_symlink():
         settle(str(path), file_mode)
