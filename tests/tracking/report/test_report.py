@@ -206,7 +206,9 @@ def test_mot_holds_the_model_angles_in_degrees(workspace_report) -> None:
     np.testing.assert_allclose(ours, [knee[round(t, 4)] for t in rows[:, 0]], atol=1e-3)
 
 
-def test_opensim_reads_the_trc_and_the_mot(workspace_report) -> None:
+def test_opensim_reads_the_trc_and_the_mot(workspace_report, tmp_path,
+                                           monkeypatch: pytest.MonkeyPatch) -> None:  # fmt: skip
+    monkeypatch.chdir(tmp_path)  # OpenSim writes opensim.log into the working folder
     opensim = pytest.importorskip(
         "opensim", reason="the opensim package is not installed (pip install opensim; not a "
         "dependency): OpenSim's own readers are not tried")
