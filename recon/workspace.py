@@ -28,6 +28,7 @@ import os
 import platform
 import re
 import shutil
+import stat
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -175,6 +176,54 @@ def _remove_with_sidecars(path: Path) -> None:
         _remove(sidecar)
 
 
+def current_umask() -> int:
+    """The process's file-creation mask (read without changing it where Linux allows)."""
+    with contextlib.suppress(OSError, ValueError):
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    mask = os.umask(0o022)  # elsewhere the only way to read it is to set it, then restore it
+    os.umask(mask)
+    return mask
+
+
+def output_mode(*, folder: bool = False) -> int:
+    """Permission bits of a new output: what ``open()`` / ``mkdir()`` give under the umask
+    (0644 / 0755 with the usual 022)."""
+    return (0o777 if folder else 0o666) & ~current_umask()
+
+
+def set_output_modes(path: Path) -> None:
+    """Give ``path`` (and, for a folder, everything in it) the mode of a new output.
+
+    Writers that go through `tempfile` (``mkstemp``, ``mkdtemp``) create 0600 / 0700 on
+    purpose; renamed into place, such a file would be the one output others cannot read
+    (issue 21: ``tracks/motion.bvh`` was 0600 while the rest was 0644). Symbolic links and
+    hard-linked files (more than one link: the photos and videos a workspace links to its
+    sources) are left alone: their mode is their source's, which is only read.
+    """
+    file_mode, folder_mode = output_mode(), output_mode(folder=True)
+
+    def settle(item: str, wanted: int) -> None:
+        st = os.lstat(item)
+        if stat.S_ISLNK(st.st_mode) or (not stat.S_ISDIR(st.st_mode) and st.st_nlink > 1):
+            return
+        if stat.S_IMODE(st.st_mode) != wanted:
+            # A mode that cannot be set (a file of another user) is no reason to lose the output.
+            with contextlib.suppress(PermissionError):
+                os.chmod(item, wanted)
+
+    if not path.is_dir() or path.is_symlink():
+        settle(str(path), file_mode)
+        return
+    settle(str(path), folder_mode)
+    for folder, dirs, files in os.walk(path):  # symbolic links to folders are not followed
+        for name in dirs:
+            settle(os.path.join(folder, name), folder_mode)
+        for name in files:
+            settle(os.path.join(folder, name), file_mode)
+
+
 @contextlib.contextmanager
 def atomic_output(target: Path, *, seed_from: Path | None = None) -> Iterator[Path]:
     """Yield a temporary path next to ``target``; on success it replaces ``target``.
@@ -183,6 +232,8 @@ def atomic_output(target: Path, *, seed_from: Path | None = None) -> Iterator[Pa
     COLMAP database). On failure the temporary path is removed and ``target`` is untouched.
     SQLite's sidecar files (``-wal``, ``-shm``, ``-journal``) of the temporary path are removed
     with it, and travel with it on success, so a killed run's leftovers never reach a copy.
+    Whatever wrote it, the output gets the mode of a new file (folder) under the umask
+    (`set_output_modes`), so every output is equally readable.
     """
     tmp = partial_path(target)
     _remove_with_sidecars(tmp)
@@ -193,6 +244,8 @@ def atomic_output(target: Path, *, seed_from: Path | None = None) -> Iterator[Pa
     except BaseException:
         _remove_with_sidecars(tmp)
         raise
+    if tmp.exists() and not tmp.is_symlink():
+        set_output_modes(tmp)
     if tmp.is_dir():
         # A directory cannot be atomically swapped over a non-empty one: move the old one aside
         # first, so that at every instant either the old or the new model is complete.

@@ -173,14 +173,16 @@ class FitCommand:
 
 
 class ReportCommand:
-    help = "motion report: joint angles, centre of mass, joint loads (HTML, CSV, TRC)"
+    help = "motion report: joint angles, centre of mass, joint loads (HTML, CSV, TRC, MOT)"
     description = ("Kinematics and inverse dynamics of a tracked sequence (WS/tracks/pose.json) "
                    "or of a BVH clip (--bvh FILE --out DIR): segment positions, velocities, "
                    "accelerations and orientations, centre of mass, angular velocities and "
                    "accelerations, ISB joint angles, and Newton-Euler joint forces and moments "
                    "(de Leva 1996 segments), after a zero-lag Butterworth low-pass. Writes "
-                   "report/index.html, report/*.csv, report/motion.trc and a Rerun recording "
-                   "(WS/logs/report.rrd or DIR/report/report.rrd).")
+                   "report/index.html (self-contained), report/*.csv, report/motion.trc "
+                   "(Pose2Sim's marker names unless --marker-set ours), report/motion.mot "
+                   "(joint angles for OpenSim) and a Rerun recording (WS/logs/report.rrd or "
+                   "DIR/report/report.rrd).")
 
     def add_arguments(self, parser: argparse.ArgumentParser) -> None:
         from tracking.report.step import ReportConfig

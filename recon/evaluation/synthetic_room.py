@@ -39,6 +39,7 @@ import cv2
 import numpy as np
 
 from recon.cameras import Camera, look_at, write_cameras_json
+from recon.workspace import output_mode
 
 # Room extent in metres: x in [-3.5, 3.5], y in [-3, 3], z in [0, 2.8].
 ROOM_MIN = np.array([-3.5, -3.0, 0.0])
@@ -526,10 +527,14 @@ def render_scene(config: SyntheticSceneConfig) -> SyntheticScene:
 
 
 def _write_bytes_atomic(path: Path, data: bytes) -> None:
+    # A hidden temporary (not `atomic_output`'s ``.partial`` sibling): the folder is a photo
+    # folder, whose scan skips hidden files, so a killed run leaves no photo behind. mkstemp
+    # makes it 0600; it gets the mode of any new file before it takes the photo's name.
     fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
+        os.chmod(tmp_name, output_mode())
         os.replace(tmp_name, path)
     except BaseException:
         Path(tmp_name).unlink(missing_ok=True)

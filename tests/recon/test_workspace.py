@@ -6,6 +6,7 @@ import json
 import os
 import shutil
 import sqlite3
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -129,6 +130,60 @@ def test_atomic_output_keeps_the_old_file_when_the_step_fails(tmp_path):
         tmp.mkdir()
         (tmp / "cameras.bin").write_text("new")
     assert (target / "cameras.bin").read_text() == "new"
+
+
+@pytest.fixture
+def umask_022():
+    """The usual umask, whatever the test runner's is (restored after)."""
+    old = os.umask(0o022)
+    yield
+    os.umask(old)
+
+
+def test_atomic_output_gives_every_output_the_mode_of_a_new_file(tmp_path, umask_022):
+    """A writer that creates its file through tempfile (0600) or a folder through mkdtemp
+    (0700) still delivers the mode open()/mkdir() give: 0644 / 0755 under umask 022."""
+    plain, private, folder = tmp_path / "a.txt", tmp_path / "b.bvh", tmp_path / "model"
+    with atomic_output(plain) as tmp:
+        tmp.write_text("plain")
+    with atomic_output(private) as tmp:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)  # as mkstemp does
+        os.write(fd, b"private")
+        os.close(fd)
+    with atomic_output(folder) as tmp:
+        tmp.mkdir(mode=0o700)
+        (tmp / "sub").mkdir(mode=0o700)
+        (tmp / "sub" / "points.bin").write_bytes(b"x")
+        os.chmod(tmp / "sub" / "points.bin", 0o600)
+    modes = {p.relative_to(tmp_path).as_posix(): stat.S_IMODE(p.stat().st_mode)
+             for p in (plain, private, folder, folder / "sub", folder / "sub" / "points.bin")}
+    assert modes == {"a.txt": 0o644, "b.bvh": 0o644, "model": 0o755, "model/sub": 0o755,
+                     "model/sub/points.bin": 0o644}
+
+
+def test_atomic_output_leaves_linked_sources_modes_alone(tmp_path, umask_022):
+    """A folder output that hard-links its sources (WS/images, WS/videos) must not chmod them:
+    a hard link shares its mode with the user's own file."""
+    source = tmp_path / "photo.jpg"
+    source.write_bytes(b"jpeg")
+    os.chmod(source, 0o600)
+    with atomic_output(tmp_path / "images") as tmp:
+        tmp.mkdir()
+        os.link(source, tmp / "photo.jpg")
+        os.symlink(source, tmp / "alias.jpg")
+    assert stat.S_IMODE(source.stat().st_mode) == 0o600
+    assert stat.S_IMODE((tmp_path / "images").stat().st_mode) == 0o755
+
+
+def test_atomic_output_modes_respect_a_stricter_umask(tmp_path):
+    old = os.umask(0o077)
+    try:
+        with atomic_output(tmp_path / "a.txt") as tmp:
+            tmp.write_text("plain")
+            os.chmod(tmp, 0o666)
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE((tmp_path / "a.txt").stat().st_mode) == 0o600
 
 
 def test_file_digest_is_the_content_hash_read_in_chunks(tmp_path):

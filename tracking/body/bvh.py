@@ -15,7 +15,6 @@ Conventions (those of the BVH format as Blender, MotionBuilder and the CMU clips
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -340,17 +339,14 @@ def format_bvh(motion: Motion) -> str:
 
 
 def write_bvh(motion: Motion, path: str | os.PathLike[str]) -> None:
-    """Write `motion` to `path` atomically (a temporary file in the same folder, then rename)."""
+    """Write `motion` to `path` atomically, with the mode of any new output
+    (`recon.workspace.atomic_output`: a temporary sibling, then rename)."""
+    from recon.workspace import atomic_output
+
     path = Path(path)
     text = format_bvh(motion)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_output(path) as tmp:
+        tmp.write_text(text, encoding="utf-8", newline="\n")
 
 
 # ----------------------------------------------------------------------------- rotations

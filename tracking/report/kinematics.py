@@ -67,6 +67,7 @@ from tracking.body.model import (
     NODE_INDEX,
     NODE_NAMES,
     NODE_PARENTS,
+    POSE_LAYOUT,
     BodyShape,
     Pose,
     forward_kinematics,
@@ -422,6 +423,41 @@ JOINT_ANGLE_CONVENTIONS: tuple[AngleConvention, ...] = (
 CONVENTION_OF_JOINT: dict[str, AngleConvention] = {c.joint: c for c in JOINT_ANGLE_CONVENTIONS}
 ANGLE_JOINTS: tuple[str, ...] = JOINT_NAMES  # the 11 joints with degrees of freedom
 _AXIS_SLOT = {"X": 0, "Z": 1, "Y": 2}
+
+
+def _model_angles() -> dict[str, tuple[str, ...]]:
+    # A joint's rotation parameters turn about its parent's X, Y or Z axis (`PoseParam.axis`,
+    # the elbow's about -X), the axes of the Cardan sequence: X is flexion (the pelvis' tilt),
+    # Z abduction (obliquity), Y rotation (heading).
+    slots: dict[str, set[int]] = {joint: set() for joint in ANGLE_JOINTS}
+    for param in POSE_LAYOUT:
+        if param.kind == "rotation" and param.joint in slots:
+            axis = "XYZ"[int(np.argmax(np.abs(param.axis)))]
+            slots[param.joint].add(_AXIS_SLOT[axis])
+    return {joint: tuple(ANGLE_NAMES[k] for k in sorted(s)) for joint, s in slots.items()}
+
+
+MODEL_ANGLES: dict[str, tuple[str, ...]] = _model_angles()
+"""The angles (`ANGLE_NAMES`) of each joint that are degrees of freedom of the body model, read
+from its own list of pose parameters (`tracking.body.model.POSE_LAYOUT`): all three for the
+pelvis, spine, shoulders and hips; flexion only for the hinges (neck, elbows, knees). The other
+angles of a hinge are 0 by construction (the Cardan decomposition of a rotation about X), in
+every sequence of this model: the report leaves them out of its table, plots and ``.mot``
+instead of printing columns of zeros. A tracked, retargeted or BVH sequence is a pose of this
+model, so its list is the one to go by (zeros in the data would also drop a real degree of
+freedom that happened not to move); `shown_angles` keeps any other angle that does move, which
+only a sequence built in code from arbitrary transforms has."""
+
+
+def shown_angles(joint_angles_rad: np.ndarray, tolerance_deg: float = 1e-3
+                 ) -> dict[str, tuple[str, ...]]:  # fmt: skip
+    """`MODEL_ANGLES`, plus any angle of (T, J, 3) ``joint_angles_rad`` (`ANGLE_JOINTS` order)
+    that moves more than ``tolerance_deg`` away from 0 in some frame, so that nothing measured is
+    hidden; in `ANGLE_NAMES` order."""
+    moving = np.nanmax(np.abs(np.degrees(joint_angles_rad)), axis=0, initial=0.0) > tolerance_deg
+    return {joint: tuple(name for k, name in enumerate(ANGLE_NAMES)
+                         if name in MODEL_ANGLES[joint] or moving[j, k])
+            for j, joint in enumerate(ANGLE_JOINTS)}  # fmt: skip
 
 
 def relative_rotation(world_from_node: np.ndarray, joint: str) -> np.ndarray:

@@ -12,11 +12,14 @@ Outputs, in ``report/`` (inside the workspace, or inside ``--out DIR`` for a BVH
 ``report.partial/`` and renamed into place when complete:
 
 * ``index.html``: summary tables, conventions, assumptions and plots (joint angles, joint
-  angular velocities, centre of mass, joint moments), a self-contained folder for a browser;
+  angular velocities, centre of mass, joint moments), one self-contained page (the plots are
+  embedded as data URIs; they are also beside it as image files);
 * one tidy long-form CSV per quantity (``joint_angles.csv``: ``frame,time_s,joint,angle,
   degrees``; ``center_of_mass.csv``: ``frame,time_s,x,y,z`` in metres, in the input's Y-up
   axes (a pose file's upright frame; gravity is -Y); ...). Frames without data have no rows;
-* ``motion.trc``: the joint centres as markers (OpenSim / Pose2Sim format, metres, Y up);
+* ``motion.trc``: the joint centres as markers (OpenSim / Pose2Sim format, metres, Y up), named
+  as Pose2Sim's OpenSim models name them unless ``--marker-set ours``; ``motion.mot``: the joint
+  angles as an OpenSim motion file (`tracking.report.opensim`);
 * ``summary.json``: the numbers of the summary, the config and its fingerprint;
 * a Rerun recording (``report/report.rrd``; ``WS/logs/report.rrd`` for a workspace) with the
   curves and the skeleton on the ``frame`` and ``time`` timelines of the tracking recording.
@@ -24,6 +27,7 @@ Outputs, in ``report/`` (inside the workspace, or inside ``--out DIR`` for a BVH
 
 from __future__ import annotations
 
+import base64
 import dataclasses
 import enum
 import html
@@ -53,9 +57,19 @@ from tracking.report.kinematics import (
     ANGLE_JOINTS,
     ANGLE_NAMES,
     CONVENTION_OF_JOINT,
+    MODEL_ANGLES,
     Kinematics,
     MotionSequence,
     compute_kinematics,
+    shown_angles,
+)
+from tracking.report.opensim import (
+    MarkerSet,
+    format_rate,
+    nominal_rate_hz,
+    trc_markers,
+    write_mot,
+    write_trc,
 )
 
 MAX_REPORT_FRAMES = 200_000
@@ -101,6 +115,12 @@ class ReportConfig:
     )
     plot_format: PlotFormat = field(
         default=PlotFormat.PNG, metadata={"help": "format of the plots in the HTML report"}
+    )
+    marker_set: MarkerSet = field(
+        default=MarkerSet.POSE2SIM,
+        metadata={"help": "marker names in motion.trc: pose2sim (Pose2Sim's: Hip, LHip, RKnee, "
+                  "Neck, Head, ..., which its OpenSim models scale and track; the spine has no "
+                  "such marker and is left out) or ours (the body model's 16 joint names)"},
     )
     truth: bool = field(
         default=False,
@@ -374,7 +394,10 @@ def report_sequence(
             summary["fingerprint"] = step_fingerprint or fingerprint("report", config.as_dict())
             summary["config"] = config.as_dict()
             write_csvs(tmp, kin, loads)
-            write_trc(tmp / "motion.trc", kin)
+            write_trc(tmp / "motion.trc", kin.frames, kin.frame_rate, kin.joint_centres,
+                      config.marker_set)
+            columns, angles_deg = mot_columns(kin)
+            write_mot(tmp / "motion.mot", kin.frames, kin.frame_rate, columns, angles_deg)
             figures = write_plots(tmp, kin, loads, config.plot_format)
             rrd = tmp / "report.rrd" if own_recording else final_recording
             log_report(rrd, kin, loads)
@@ -465,6 +488,11 @@ def _summary(seq: MotionSequence, kin: Kinematics, loads: JointLoads, config: Re
         "external_vertical_force_bw": [float(np.nanmin(vertical)), float(np.nanmax(vertical))]
         if np.isfinite(vertical).any() else None,
         "assumptions": list(ASSUMPTIONS),
+        "opensim": {
+            "rate_hz": nominal_rate_hz(kin.frame_rate),
+            "marker_set": str(config.marker_set),
+            "markers": [name for _, name in trc_markers(config.marker_set)],
+        },
     }
 
 
@@ -473,7 +501,7 @@ def _float(value: float) -> float | None:
 
 
 # ---------------------------------------------------------------------------------------------
-# CSV and TRC
+# CSV (the TRC and MOT: tracking.report.opensim)
 # ---------------------------------------------------------------------------------------------
 
 
@@ -552,6 +580,19 @@ def write_csvs(folder: Path, kin: Kinematics, loads: JointLoads) -> list[str]:
     return [*files, "gaps.csv", "segments.csv"]
 
 
+def mot_columns(kin: Kinematics) -> tuple[list[str], np.ndarray]:
+    """Columns ``<joint>_<angle>`` of ``motion.mot`` (the angles `shown_angles` keeps: the
+    body model's degrees of freedom) and their (T, C) values in degrees."""
+    shown = shown_angles(kin.joint_angles)
+    columns, values = [], []
+    for j, joint in enumerate(ANGLE_JOINTS):
+        for k, name in enumerate(ANGLE_NAMES):
+            if name in shown[joint]:
+                columns.append(f"{joint}_{name}")
+                values.append(np.degrees(kin.joint_angles[:, j, k]))
+    return columns, np.stack(values, axis=1)
+
+
 def _quaternions(rotations: np.ndarray) -> np.ndarray:
     """(T, S, 4) xyzw (scalar last, scipy and Rerun order); NaN where the frame has no data."""
     from scipy.spatial.transform import Rotation
@@ -562,113 +603,133 @@ def _quaternions(rotations: np.ndarray) -> np.ndarray:
     return out
 
 
-def write_trc(path: Path, kin: Kinematics) -> None:
-    """Joint centres as TRC markers (OpenSim / Pose2Sim): tab-separated, metres, the input's
-    world axes (Y up, as OpenSim expects); frames without data have empty marker fields."""
-    names = NODE_NAMES
-    n = len(kin.frames)
-    rate = f"{kin.frame_rate:.6g}"
-    lines = [
-        f"PathFileType\t4\t(X/Y/Z)\t{path.name}",
-        "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\t"
-        "OrigDataStartFrame\tOrigNumFrames",
-        f"{rate}\t{rate}\t{n}\t{len(names)}\tm\t{rate}\t{int(kin.frames[0]) + 1}\t{n}",
-        "Frame#\tTime\t" + "\t\t\t".join(names) + "\t\t",
-        "\t\t" + "\t".join(f"X{i}\tY{i}\tZ{i}" for i in range(1, len(names) + 1)),
-        "",
-    ]
-    points = kin.joint_centres
-    for t in range(n):
-        if np.isfinite(points[t]).all():
-            values = "\t".join(f"{v:.6f}" for v in points[t].ravel())
-        else:
-            values = "\t".join([""] * (3 * len(names)))
-        lines.append(f"{t + 1}\t{kin.times_s[t]:.6f}\t{values}")
-    path.write_text("\n".join(lines) + "\n")
-
-
 # ---------------------------------------------------------------------------------------------
 # Plots
 # ---------------------------------------------------------------------------------------------
 
 _PLOT_JOINTS = ("pelvis", "spine", "neck", "shoulder", "elbow", "hip", "knee")
 _MOMENT_JOINTS = ("neck", "spine", "shoulder", "elbow", "hip", "knee", "ankle")
+PLOT_DPI = 100
+"""Pixels per inch of the PNG plots: a 12-inch figure is 1,200 px, the width of the page, so
+they show at about 100% in a browser."""
+PLOT_STYLE = {"font.size": 11.0, "axes.titlesize": 12.0, "axes.labelsize": 11.0,
+              "legend.fontsize": 12.0, "xtick.labelsize": 10.0, "ytick.labelsize": 10.0,
+              "figure.titlesize": 14.0, "svg.fonttype": "none"}  # fmt: skip
+"""Font sizes in points: at `PLOT_DPI` the smallest (tick labels, 10 pt) is 14 px high and the
+legends (12 pt) 17 px, readable at 100% zoom. SVG text stays text (smaller, searchable)."""
+_SIDE_STYLE = {"l": ("-", "tab:blue", "left"), "r": ("--", "tab:red", "right"),
+               "": ("-", "k", "midline")}  # fmt: skip
 
 
-def _sides(name: str, joints: Sequence[str]) -> list[tuple[int, str, str]]:
-    """(index, label, line style) of a midline joint or of both sides of a limb joint."""
+def _sides(name: str, joints: Sequence[str]) -> list[tuple[int, str]]:
+    """(index, side: "l", "r" or "" for a midline joint) of a joint or of both sides of a limb
+    joint."""
     if name in joints:
-        return [(joints.index(name), name, "-")]
-    return [(joints.index(f"{s}_{name}"), f"{s}_{name}", style)
-            for s, style in (("l", "-"), ("r", "--")) if f"{s}_{name}" in joints]
+        return [(joints.index(name), "")]
+    return [(joints.index(f"{s}_{name}"), s) for s in "lr" if f"{s}_{name}" in joints]
 
 
-def _grid_plot(path: Path, kin: Kinematics, rows: Sequence[str], joints: Sequence[str],
-               values: np.ndarray, ylabel: str, title: str) -> None:  # fmt: skip
+def _figure_legend(fig: Any, sides: Sequence[str]) -> None:
+    """One legend for the whole figure, in a row under its title: outside every plot."""
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], ls=_SIDE_STYLE[s][0], color=_SIDE_STYLE[s][1], lw=1.6,
+                      label=_SIDE_STYLE[s][2]) for s in ("", "l", "r") if s in sides]  # fmt: skip
+    fig.legend(handles=handles, loc="upper center", ncols=len(handles), frameon=False,
+               bbox_to_anchor=(0.5, 1 - 0.55 / fig.get_figheight()))
+
+
+def grid_figure(kin: Kinematics, rows: Sequence[str], joints: Sequence[str],
+                values: np.ndarray, ylabel: str, title: str,
+                shown: dict[str, tuple[str, ...]] | None = None) -> Any:  # fmt: skip
+    """A (rows x 3) grid of curves over time, one row per joint (both sides of a limb in one
+    plot), columns `ANGLE_NAMES`. ``shown``: the angles of each joint to draw (default all); a
+    plot of an angle no joint of the row has says so instead of drawing a line at zero."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(len(rows), 3, figsize=(12, 2.0 * len(rows) + 0.8), sharex=True,
-                             squeeze=False)  # fmt: skip
-    for r, name in enumerate(rows):
-        for c, component in enumerate(ANGLE_NAMES):
-            ax = axes[r, c]
-            for j, label, style in _sides(name, joints):
-                color = "tab:red" if label.startswith("r_") else "tab:blue"
-                ax.plot(kin.times_s, values[:, j, c], style, color=color, lw=1.2, label=label)
+    with plt.rc_context(PLOT_STYLE):
+        fig, axes = plt.subplots(len(rows), 3, figsize=(12, 2.1 * len(rows) + 1.2),
+                                 sharex=True, squeeze=False)  # fmt: skip
+        sides_drawn: set[str] = set()
+        for r, name in enumerate(rows):
+            for c, component in enumerate(ANGLE_NAMES):
+                ax = axes[r, c]
+                drawn = False
+                for j, side in _sides(name, joints):
+                    if shown is not None and component not in shown[joints[j]]:
+                        continue
+                    style, color, _ = _SIDE_STYLE[side]
+                    ax.plot(kin.times_s, values[:, j, c], style, color=color, lw=1.3)
+                    sides_drawn.add(side)
+                    drawn = True
+                ax.grid(alpha=0.3)
+                if not drawn:
+                    ax.text(0.5, 0.5, "not a degree of freedom\nof the body model",
+                            transform=ax.transAxes, ha="center", va="center", color="0.45")
+                    ax.set_yticks([])
+                else:
+                    low, high = ax.get_ylim()
+                    if high - low < 2.0:  # a constant curve: no zoom onto float noise
+                        mid = 0.5 * (low + high)
+                        ax.set_ylim(mid - 1.0, mid + 1.0)
+                if r == 0:
+                    ax.set_title(component)
+                if c == 0:
+                    ax.set_ylabel(f"{name}\n{ylabel}")
+        for ax in axes[-1]:
+            ax.set_xlabel("time (s)")
+        fig.suptitle(title, y=1 - 0.12 / fig.get_figheight(), va="top")
+        _figure_legend(fig, sorted(sides_drawn))
+        # Fixed margins (tight_layout costs about a second on 21 axes); the top 1.2 inches hold
+        # the title and the legend.
+        fig.subplots_adjust(left=0.09, right=0.985, top=1 - 1.2 / fig.get_figheight(),
+                            bottom=0.55 / fig.get_figheight(), hspace=0.18, wspace=0.22)
+    return fig
+
+
+def com_figure(kin: Kinematics, loads: JointLoads) -> Any:
+    """Centre of mass: position, speed, top-view path and the external vertical force."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    with plt.rc_context(PLOT_STYLE):
+        fig, axes = plt.subplots(2, 3, figsize=(12, 7.0))
+        t = kin.times_s
+        for k, axis in enumerate("xyz"):
+            axes[0, k].plot(t, kin.com[:, k], color="k", lw=1.3)
+            axes[0, k].set_title(f"COM {axis} (m)")
+        speed = np.linalg.norm(kin.com_velocity, axis=-1)
+        horizontal = np.linalg.norm(kin.com_velocity[:, [0, 2]], axis=-1)
+        axes[1, 0].plot(t, speed, color="k", lw=1.3, label="speed")
+        axes[1, 0].plot(t, horizontal, "--", color="tab:green", lw=1.3, label="horizontal")
+        # The legend is the plot's title line: outside the curves whatever they do.
+        axes[1, 0].legend(loc="lower left", bbox_to_anchor=(0.0, 1.0), ncols=2, frameon=False,
+                          borderaxespad=0.2, title="COM speed (m/s):", alignment="left")
+        axes[1, 1].plot(kin.com[:, 0], kin.com[:, 2], color="k", lw=1.3)
+        axes[1, 1].set_aspect("equal", adjustable="datalim")
+        axes[1, 1].set_title("COM path, top view (x, z in m)")
+        weight = kin.segments.total_mass_kg * 9.80665
+        axes[1, 2].plot(t, loads.force_in_world[:, 0, 1] / weight, color="tab:purple", lw=1.3)
+        axes[1, 2].axhline(1.0, color="0.5", lw=0.8)
+        axes[1, 2].set_title("external vertical force (body weights)")
+        for ax in axes.ravel():
             ax.grid(alpha=0.3)
-            low, high = ax.get_ylim()
-            if high - low < 2.0:  # a constant curve: no zoom onto float noise
-                mid = 0.5 * (low + high)
-                ax.set_ylim(mid - 1.0, mid + 1.0)
-            if r == 0:
-                ax.set_title(component)
-            if c == 0:
-                ax.set_ylabel(f"{name}\n{ylabel}")
-            if c == 2:
-                ax.legend(fontsize=7, loc="upper right")
-    for ax in axes[-1]:
-        ax.set_xlabel("time (s)")
-    fig.suptitle(title)
-    # Fixed margins: tight_layout costs about a second on 21 axes.
-    fig.subplots_adjust(left=0.08, right=0.98, top=1 - 0.8 / fig.get_figheight(),
-                        bottom=0.45 / fig.get_figheight(), hspace=0.15, wspace=0.22)
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
+        for ax in (axes[0, 0], axes[0, 1], axes[0, 2], axes[1, 0], axes[1, 2]):
+            ax.set_xlabel("time (s)")
+        fig.tight_layout()
+    return fig
 
 
-def _com_plot(path: Path, kin: Kinematics, loads: JointLoads) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
+def _save(fig: Any, path: Path) -> None:
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(2, 3, figsize=(12, 6.5))
-    t = kin.times_s
-    for k, axis in enumerate("xyz"):
-        axes[0, k].plot(t, kin.com[:, k], color="k", lw=1.2)
-        axes[0, k].set_title(f"COM {axis} (m)")
-    speed = np.linalg.norm(kin.com_velocity, axis=-1)
-    horizontal = np.linalg.norm(kin.com_velocity[:, [0, 2]], axis=-1)
-    axes[1, 0].plot(t, speed, color="k", lw=1.2, label="speed")
-    axes[1, 0].plot(t, horizontal, "--", color="tab:green", lw=1.2, label="horizontal")
-    axes[1, 0].set_title("COM speed (m/s)")
-    axes[1, 0].legend(fontsize=7)
-    axes[1, 1].plot(kin.com[:, 0], kin.com[:, 2], color="k", lw=1.2)
-    axes[1, 1].set_aspect("equal", adjustable="datalim")
-    axes[1, 1].set_title("COM path, top view (x, z in m)")
-    weight = kin.segments.total_mass_kg * 9.80665
-    axes[1, 2].plot(t, loads.force_in_world[:, 0, 1] / weight, color="tab:purple", lw=1.2)
-    axes[1, 2].axhline(1.0, color="0.5", lw=0.8)
-    axes[1, 2].set_title("external vertical force (body weights)")
-    for ax in axes.ravel():
-        ax.grid(alpha=0.3)
-    for ax in (axes[0, 0], axes[0, 1], axes[0, 2], axes[1, 0], axes[1, 2]):
-        ax.set_xlabel("time (s)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
+    with plt.rc_context(PLOT_STYLE):
+        fig.savefig(path, dpi=PLOT_DPI)
     plt.close(fig)
 
 
@@ -682,14 +743,17 @@ def write_plots(folder: Path, kin: Kinematics, loads: JointLoads,
         "Centre of mass": f"center_of_mass.{ext}",
         "Joint moments": f"joint_moments.{ext}",
     }
-    _grid_plot(folder / figures["Joint angles"], kin, _PLOT_JOINTS, ANGLE_JOINTS,
-               np.degrees(kin.joint_angles), "deg", "Joint angles (left solid, right dashed)")
-    _grid_plot(folder / figures["Joint angular velocities"], kin, _PLOT_JOINTS, ANGLE_JOINTS,
-               np.degrees(kin.joint_angular_velocity), "deg/s", "Joint angular velocities")
-    _com_plot(folder / figures["Centre of mass"], kin, loads)
-    _grid_plot(folder / figures["Joint moments"], kin, _MOMENT_JOINTS, loads.joints,
-               loads.moment_anatomical, "N m",
-               "Joint moments on the proximal segment's axes (legs: valid in swing only)")
+    shown = shown_angles(kin.joint_angles)
+    _save(grid_figure(kin, _PLOT_JOINTS, ANGLE_JOINTS, np.degrees(kin.joint_angles), "deg",
+                      "Joint angles", shown), folder / figures["Joint angles"])
+    _save(grid_figure(kin, _PLOT_JOINTS, ANGLE_JOINTS, np.degrees(kin.joint_angular_velocity),
+                      "deg/s", "Joint angular velocities", shown),
+          folder / figures["Joint angular velocities"])
+    _save(com_figure(kin, loads), folder / figures["Centre of mass"])
+    # Moments about every axis, hinges too: the joint's structures hold what it does not move.
+    _save(grid_figure(kin, _MOMENT_JOINTS, loads.joints, loads.moment_anatomical, "N m",
+                      "Joint moments on the proximal segment's axes (legs: valid in swing only)"),
+          folder / figures["Joint moments"])
     return figures
 
 
@@ -751,6 +815,7 @@ _CSS = """body{font-family:system-ui,sans-serif;max-width:1200px;margin:2em auto
 color:#222}table{border-collapse:collapse;margin:0.5em 0 1.5em}td,th{border:1px solid #ccc;
 padding:3px 8px;text-align:right}th{background:#f3f3f3}
 td:first-child,th:first-child{text-align:left}img{max-width:100%;border:1px solid #ddd}
+td.nodof{text-align:center;color:#888;font-style:italic}
 code{background:#f3f3f3;padding:0 3px}li{margin:0.2em 0}"""
 
 
@@ -777,13 +842,7 @@ def write_html(path: Path, summary: dict[str, Any], kin: Kinematics, loads: Join
     if s["external_vertical_force_bw"]:
         lo, hi = s["external_vertical_force_bw"]
         com_rows.append(("external vertical force (body weights)", f"{lo:.2f} .. {hi:.2f}"))
-    angle_rows = []
-    for joint in ANGLE_JOINTS:
-        row: list[Any] = [joint]
-        for name in ANGLE_NAMES:
-            r = s["angles"][joint][name]
-            row += [r["min"], r["max"]] if r else [None, None]
-        angle_rows.append(row)
+    angle_table = _angle_table(s["angles"], shown_angles(kin.joint_angles))
     load_rows = [[j, *(s["loads"][j][f"peak_{n}_moment_nm"] for n in ANGLE_NAMES),
                   s["loads"][j]["peak_force_n"]] for j in loads.joints]  # fmt: skip
     conventions = [(c.joint, "-".join(c.sequence), c.meaning)
@@ -807,14 +866,16 @@ def write_html(path: Path, summary: dict[str, Any], kin: Kinematics, loads: Join
     parts += [
         "<h2>Summary</h2><h3>Centre of mass</h3>", _table(("quantity", "value"), com_rows),
         "<h3>Joint angles (degrees)</h3>",
-        _table(("joint", "flexion min", "flexion max", "abduction min", "abduction max",
-                "rotation min", "rotation max"), angle_rows),
+        f"<p>Only the angles the body model can move: {_hinge_note()}; the others are 0 by "
+        "construction and left out (<code>joint_angles.csv</code> still lists them).</p>",
+        angle_table,
         "<h3>Joint loads (peaks)</h3>",
         _table(("joint", "|flexion moment| N m", "|abduction moment| N m",
                 "|rotation moment| N m", "|force| N"), load_rows),
         "<h2>Plots</h2>",
-        *(f"<h3>{html.escape(title)}</h3><img src='{name}' alt='{html.escape(title)}'>"
-          for title, name in figures.items()),
+        # Embedded, so that the page copied or mailed alone still shows them.
+        *(f"<h3>{html.escape(title)}</h3><img src='{embedded_image(path.parent / name)}' "
+          f"alt='{html.escape(title)}'>" for title, name in figures.items()),
         "<h2>Conventions</h2>",
         "<p>World axes of the input (Y up, metres). Segment frames are the body model's node "
         "frames (X to the subject's left, Y along the segment, Z forward at rest). Joint angles "
@@ -831,11 +892,17 @@ def write_html(path: Path, summary: dict[str, Any], kin: Kinematics, loads: Join
         *(f"<li>{html.escape(a)}</li>" for a in s["assumptions"]),
         "</ul><p>Segment parameters: de Leva P. (1996) Adjustments to Zatsiorsky-Seluyanov's "
         "segment inertia parameters. J Biomech 29(9):1223-1230 (values used: "
-        "<a href='segments.csv'>segments.csv</a>).</p>",
-        "<h2>Files</h2><ul>",
-        *(f"<li><a href='{n}'>{n}</a></li>" for n in csvs),
-        "<li><a href='motion.trc'>motion.trc</a>: joint centres as markers (OpenSim, Pose2Sim)"
-        "</li>",
+        "<code>segments.csv</code>).</p>",
+        # Named, not linked: the page stands alone (a copy has no files beside it).
+        "<h2>Files</h2><p>In the report's folder, beside <code>index.html</code>; the plots "
+        "above are also there as image files.</p><ul>",
+        *(f"<li><code>{html.escape(n)}</code></li>" for n in csvs),
+        f"<li><code>motion.trc</code>: joint centres as markers for OpenSim and Pose2Sim, "
+        f"{html.escape(_marker_note(s['opensim']))}, "
+        f"{format_rate(s['opensim']['rate_hz'])} Hz</li>",
+        "<li><code>motion.mot</code>: the joint angles above as an OpenSim motion file "
+        "(degrees; columns <code>&lt;joint&gt;_&lt;angle&gt;</code>, the report's ISB angles, "
+        "not the coordinates of an OpenSim model)</li>",
         f"<li>Rerun recording: <code>{html.escape(str(recording))}</code> (open with "
         f"<code>rerun {html.escape(str(recording))}</code>)</li></ul>",
         "<p>Units: positions m, velocities m/s, accelerations m/s², angles degrees, angular "
@@ -845,6 +912,56 @@ def write_html(path: Path, summary: dict[str, Any], kin: Kinematics, loads: Join
         "</body></html>",
     ]
     path.write_text("\n".join(parts) + "\n")
+
+
+def embedded_image(path: Path) -> str:
+    """The plot file (PNG or SVG) as a data URI for ``<img src>``. SVG goes in a data URI too,
+    not inline: matplotlib's SVG element ids (clip paths) repeat across figures and would clash
+    in one page."""
+    mime = {".png": "image/png", ".svg": "image/svg+xml"}[path.suffix.lower()]
+    return f"data:{mime};base64,{base64.b64encode(path.read_bytes()).decode('ascii')}"
+
+
+def _angle_table(angles: dict[str, Any], shown: dict[str, tuple[str, ...]]) -> str:
+    """Min and max of each joint's angles; the angles not in ``shown`` (not degrees of freedom
+    of the body model) are one grey cell per run of them, not columns of zeros."""
+    header = ["joint"] + [f"{n} {m}" for n in ANGLE_NAMES for m in ("min", "max")]
+    rows = []
+    for joint in ANGLE_JOINTS:
+        cells = [f"<td>{html.escape(joint)}</td>"]
+        missing: list[str] = []
+        for name in (*ANGLE_NAMES, None):
+            if name is not None and name not in shown[joint]:
+                missing.append(name)
+                continue
+            if missing:
+                cells.append(f"<td class='nodof' colspan='{2 * len(missing)}'>no "
+                             f"{' or '.join(missing)} in the body model</td>")
+                missing = []
+            if name is not None:
+                r = angles[joint][name]
+                cells += [f"<td>{_cell(v)}</td>" for v in ((r["min"], r["max"]) if r
+                                                           else (None, None))]  # fmt: skip
+        rows.append("<tr>" + "".join(cells) + "</tr>")
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>"
+
+
+def _hinge_note() -> str:
+    """Which joints of the body model turn about fewer than three axes, and about which."""
+    groups: dict[tuple[str, ...], list[str]] = {}
+    for joint, angles in MODEL_ANGLES.items():
+        if len(angles) < len(ANGLE_NAMES):
+            groups.setdefault(angles, []).append(joint)
+    return "; ".join(f"{', '.join(joints)}: {' and '.join(angles)} only"
+                     for angles, joints in groups.items())  # fmt: skip
+
+
+def _marker_note(opensim: dict[str, Any]) -> str:
+    if opensim["marker_set"] == MarkerSet.POSE2SIM:
+        return (f"Pose2Sim's marker names ({', '.join(opensim['markers'])}; the spine has none "
+                "and is left out)")
+    return "the body model's joint names (--marker-set ours)"
 
 
 def _fmt(value: float | None, digits: int) -> str:

@@ -4,7 +4,9 @@ the real CMU clips in ../shared/data/mocap_bvh."""
 from __future__ import annotations
 
 import dataclasses
+import os
 import re
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -331,3 +333,21 @@ def test_motion_validates_channel_count() -> None:
     joints = (Joint("Root", -1, np.zeros(3), ("Xrotation", "Yrotation", "Zrotation")),)
     with pytest.raises(ValueError, match=r"\(F, 3\)"):
         Motion(joints, 0.01, np.zeros((2, 4)))
+
+
+def test_written_bvh_has_the_mode_of_any_new_file(tmp_path: Path) -> None:
+    """Issue 21: tracks/motion.bvh came out 0600 (tempfile's mode) beside 0644 outputs."""
+    from tracking.body.model import BodyShape
+    from tracking.body.motion import motion_from_poses
+    from tracking.body.synthetic import walking_poses
+
+    shape = BodyShape.default(1.70)
+    motion = motion_from_poses(walking_poses(5, 30.0, shape), shape, 1.0 / 30.0)
+    out = tmp_path / "motion.bvh"
+    old = os.umask(0o022)
+    try:
+        write_bvh(motion, out)
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(out.stat().st_mode) == 0o644
+    assert list(tmp_path.iterdir()) == [out] and read_bvh(out).num_frames == 5

@@ -210,3 +210,25 @@ def test_cutoff_above_nyquist_says_so() -> None:
     seq = MotionSequence.from_poses(params_over_time(40), SHAPE, 10.0)
     with pytest.raises(UserError, match="too high for 10 frames/s"):
         compute_kinematics(seq, SEGMENTS, cutoff_hz=6.0)
+
+
+def test_model_angles_are_the_angles_the_pose_parameters_move() -> None:
+    """`MODEL_ANGLES`, read from the layout, against poses: random poses within the joint
+    limits move every listed angle by degrees and leave the others at 0 (hinges)."""
+    from tracking.body.model import LOWER_LIMITS, UPPER_LIMITS
+    from tracking.report.kinematics import ANGLE_JOINTS, ANGLE_NAMES, MODEL_ANGLES, joint_angles
+
+    rng = np.random.default_rng(0)
+    lower = np.where(np.isfinite(LOWER_LIMITS), LOWER_LIMITS, -1.0)
+    upper = np.where(np.isfinite(UPPER_LIMITS), UPPER_LIMITS, 1.0)
+    params = rng.uniform(lower, upper, size=(40, N_POSE_PARAMS))
+    world = np.stack([forward_kinematics(Pose(p), SHAPE) for p in params])
+    moved_deg = np.abs(np.degrees(joint_angles(world))).max(axis=0)  # (J, 3)
+    for j, joint in enumerate(ANGLE_JOINTS):
+        for k, name in enumerate(ANGLE_NAMES):
+            if name in MODEL_ANGLES[joint]:
+                assert moved_deg[j, k] > 5.0, (joint, name)
+            else:
+                assert moved_deg[j, k] < 1e-6, (joint, name)
+    assert {j for j, a in MODEL_ANGLES.items() if a == ("flexion",)} == {
+        "neck", "l_elbow", "r_elbow", "l_knee", "r_knee"}

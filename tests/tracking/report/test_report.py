@@ -3,11 +3,14 @@ BVH clip round trip, and bad input."""
 
 from __future__ import annotations
 
+import base64
 import csv
 import json
+import shutil
 import subprocess
 import sys
 from dataclasses import fields
+from html.parser import HTMLParser
 from pathlib import Path
 
 import numpy as np
@@ -19,12 +22,23 @@ from tracking.body.bvh import CMU_METRES_PER_UNIT, read_bvh
 from tracking.body.model import (
     LOWER_LIMITS,
     N_POSE_PARAMS,
+    NODE_NAMES,
     PARAM_INDEX,
     UPPER_LIMITS,
     BodyShape,
 )
 from tracking.body.retarget import cmu_node_positions
-from tracking.report.step import ReportConfig, report_from_bvh, report_from_workspace
+from tracking.report.kinematics import ANGLE_JOINTS, ANGLE_NAMES, MODEL_ANGLES, shown_angles
+from tracking.report.step import (
+    PLOT_DPI,
+    ReportConfig,
+    analyse,
+    com_figure,
+    grid_figure,
+    read_pose_track,
+    report_from_bvh,
+    report_from_workspace,
+)
 
 SHAPE = BodyShape.default(1.70)
 FPS = 30.0
@@ -83,12 +97,12 @@ def test_workspace_report_writes_every_output(workspace_report) -> None:
     assert result.report_dir == report and result.recording == ws / "logs" / "report.rrd"
     for name in ("index.html", "joint_angles.csv", "center_of_mass.csv", "joint_moments.csv",
                  "joint_forces.csv", "segment_angular_velocity.csv", "motion.trc",
-                 "summary.json", "joint_angles.png", "center_of_mass.png",
+                 "motion.mot", "summary.json", "joint_angles.png", "center_of_mass.png",
                  "joint_moments.png", "joint_angular_velocity.png"):
         assert (report / name).is_file(), name
     assert not (report / "report.rrd").exists() and not (ws / "report.partial").exists()
     page = (report / "index.html").read_text()
-    for needle in ("<img src='joint_angles.png'", "de Leva", "Ground reaction forces are "
+    for needle in ("<img src='data:image/png;base64,", "de Leva", "Ground reaction forces are "
                    "unknown", "6 Hz"):
         assert needle in page, needle
     assert json.loads((ws / "run.json").read_text())["steps"]["report"]["summary"]["frames"] == N
@@ -133,13 +147,241 @@ def test_com_and_trc_are_in_metres_in_the_world_axes(workspace_report) -> None:
     assert speed == pytest.approx(np.hypot(VELOCITY[0], VELOCITY[2]), rel=0.05)
     lines = (report / "motion.trc").read_text().splitlines()
     assert lines[0].startswith("PathFileType\t4\t(X/Y/Z)\tmotion.trc")
-    assert lines[2].split("\t")[:5] == ["30", "30", str(N), "16", "m"]
-    assert lines[3].split("\t")[:3] == ["Frame#", "Time", "pelvis"]
+    # Pose2Sim's marker names by default: the 15 joints that have one (not the spine).
+    assert lines[2].split("\t")[:5] == ["30", "30", str(N), "15", "m"]
+    assert lines[3].split("\t")[:3] == ["Frame#", "Time", "Hip"]
     data = lines[6:]
     assert len(data) == N
-    assert data[55].split("\t")[2:] == [""] * 48  # a frame of the long gap: no invented markers
-    pelvis = [float(v) for v in data[0].split("\t")[2:5]]
-    np.testing.assert_allclose(pelvis, [0.3, SHAPE.hip_height, 0.0], atol=1e-5)
+    assert data[55].split("\t")[2:] == ["NaN"] * 45  # a frame of the long gap: no invented markers
+    hip = [float(v) for v in data[0].split("\t")[2:5]]  # Pose2Sim's Hip: our pelvis joint
+    np.testing.assert_allclose(hip, [0.3, SHAPE.hip_height, 0.0], atol=1e-5)
+
+
+def trc_markers(path: Path) -> dict[str, np.ndarray]:
+    """Marker name -> (T, 3) positions of a TRC file (NaN where missing)."""
+    lines = path.read_text().splitlines()
+    names = [n for n in lines[3].split("\t")[2:] if n]
+    data = np.array([[float(v) for v in line.split("\t")[2:]] for line in lines[6:]])
+    assert data.shape[1] == 3 * len(names)
+    return {name: data[:, 3 * i:3 * i + 3] for i, name in enumerate(names)}
+
+
+def test_trc_markers_are_where_pose2sims_are(workspace_report) -> None:
+    """Pose2Sim's markers sit at the joint centres its pose model finds: Hip is the midpoint of
+    LHip and RHip, Head the top of the head above Neck, each wrist at the end of its forearm."""
+    ws, _ = workspace_report
+    markers = trc_markers(ws / "report" / "motion.trc")
+    joints = {name: np.array([[float(r[a]) for a in "xyz"] for r in rows])
+              for name in NODE_NAMES
+              if (rows := [r for r in read_rows(ws / "report" / "joint_positions.csv")
+                           if r["joint"] == name])}  # fmt: skip
+    ok = np.isfinite(markers["Hip"][:, 0])
+    assert ok.sum() == N - 10
+    for ours, theirs in (("pelvis", "Hip"), ("l_hip", "LHip"), ("r_knee", "RKnee"),
+                         ("l_wrist", "LWrist"), ("head_top", "Head"), ("neck", "Neck")):
+        # The CSV holds 6 significant digits, the TRC 6 decimals: 10 µm apart at most.
+        np.testing.assert_allclose(markers[theirs][ok], joints[ours], atol=1e-5, err_msg=theirs)
+    mid = 0.5 * (markers["LHip"] + markers["RHip"])
+    assert np.nanmax(np.linalg.norm(markers["Hip"] - mid, axis=1)) < 1e-3  # metres
+    assert np.all(markers["Head"][ok, 1] > markers["Neck"][ok, 1] + 0.15)
+    assert "spine" not in markers and "pelvis" not in markers
+
+
+def test_mot_holds_the_model_angles_in_degrees(workspace_report) -> None:
+    ws, _ = workspace_report
+    lines = (ws / "report" / "motion.mot").read_text().splitlines()
+    end = lines.index("endheader")
+    header = dict(line.split("=") for line in lines[1:end])
+    columns = lines[end + 1].split("\t")
+    rows = np.array([[float(v) for v in line.split("\t")] for line in lines[end + 2:]])
+    expected = ["time"] + [f"{j}_{a}" for j in ANGLE_JOINTS for a in MODEL_ANGLES[j]]
+    assert lines[0] == "motion" and columns == expected and "l_knee_abduction" not in columns
+    assert header == {"version": "1", "nRows": str(len(rows)), "nColumns": str(len(columns)),
+                      "inDegrees": "yes"}
+    assert rows.shape == (N - 10, len(columns))  # the long gap has no rows, as in the CSVs
+    knee = {round(float(r["time_s"]), 4): float(r["degrees"])
+            for r in read_rows(ws / "report" / "joint_angles.csv")
+            if r["joint"] == "l_knee" and r["angle"] == "flexion"}  # fmt: skip
+    ours = rows[:, columns.index("l_knee_flexion")]
+    np.testing.assert_allclose(ours, [knee[round(t, 4)] for t in rows[:, 0]], atol=1e-3)
+
+
+def test_opensim_reads_the_trc_and_the_mot(workspace_report, tmp_path,
+                                           monkeypatch: pytest.MonkeyPatch) -> None:  # fmt: skip
+    monkeypatch.chdir(tmp_path)  # OpenSim writes opensim.log into the working folder
+    opensim = pytest.importorskip(
+        "opensim", reason="the opensim package is not installed (pip install opensim; not a "
+        "dependency): OpenSim's own readers are not tried")
+    ws, _ = workspace_report
+    trc, mot = ws / "report" / "motion.trc", ws / "report" / "motion.mot"
+    table = opensim.TRCFileAdapter().read(str(trc))["markers"]
+    assert table.getNumRows() == N and table.getNumColumns() == 15
+    assert list(table.getColumnLabels())[:3] == ["Hip", "Neck", "LShoulder"]
+    assert table.getTableMetaDataAsString("DataRate") == "30"
+    assert table.getTableMetaDataAsString("Units") == "m"
+    markers = opensim.TimeSeriesTableVec3(str(trc))  # the same adapter, typed table
+    first, gap = markers.getRowAtIndex(0), markers.getRowAtIndex(55)
+    hip = first[list(markers.getColumnLabels()).index("Hip")]
+    np.testing.assert_allclose([hip[0], hip[1], hip[2]], [0.3, SHAPE.hip_height, 0.0],
+                               atol=1e-5)
+    assert np.isnan(gap[0][0])  # the long gap stays missing
+    assert markers.getIndependentColumn()[1] == pytest.approx(1 / FPS, abs=1e-6)
+    angles = opensim.TimeSeriesTable(str(mot))
+    assert angles.getNumRows() == N - 10
+    assert angles.getTableMetaDataAsString("inDegrees") == "yes"
+    assert "r_knee_flexion" in list(angles.getColumnLabels())
+
+
+class _Page(HTMLParser):
+    """The references of a page (every URL-valued attribute), its images and its tables."""
+
+    URL_ATTRIBUTES = frozenset({"src", "href", "srcset", "data", "poster", "action",
+                                "xlink:href", "background", "formaction"})  # fmt: skip
+
+    def __init__(self, text: str) -> None:
+        super().__init__()
+        self.references: list[tuple[str, str, str]] = []
+        self.images: list[str] = []
+        self.tables: list[list[list[tuple[str, dict[str, str | None]]]]] = []
+        self._cell: list[str] | None = None
+        self.feed(text)
+
+    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        for name, value in attrs:
+            if name in self.URL_ATTRIBUTES and value is not None:
+                self.references.append((tag, name, value))
+        if tag == "img":
+            self.images.append(dict(attrs).get("src") or "")
+        elif tag == "table":
+            self.tables.append([])
+        elif tag == "tr":
+            self.tables[-1].append([])
+        elif tag in ("td", "th"):
+            self._cell = []
+            self.tables[-1][-1].append(("", dict(attrs)))
+
+    def handle_data(self, data: str) -> None:
+        if self._cell is not None:
+            self._cell.append(data)
+
+    def handle_endtag(self, tag: str) -> None:
+        if tag in ("td", "th") and self._cell is not None:
+            row = self.tables[-1][-1]
+            row[-1] = ("".join(self._cell), row[-1][1])
+            self._cell = None
+
+
+PLOTS = ("joint_angles", "joint_angular_velocity", "center_of_mass", "joint_moments")
+
+
+def test_index_html_stands_alone_with_its_plots_embedded(workspace_report, tmp_path) -> None:
+    """Issue 21: the page linked its plots by relative path, so a copy showed broken images."""
+    ws, _ = workspace_report
+    report = ws / "report"
+    copy = tmp_path / "mailed.html"
+    shutil.copy(report / "index.html", copy)  # alone, without the report's folder
+    text = copy.read_text()
+    page = _Page(text)
+    assert [r for r in page.references if not r[2].startswith("data:")] == []
+    assert "url(" not in text and "@import" not in text  # nor from the style sheet
+    assert len(page.images) == len(PLOTS)
+    for src, name in zip(page.images, PLOTS, strict=True):
+        head, _, payload = src.partition(",")
+        assert head == "data:image/png;base64"
+        assert base64.b64decode(payload) == (report / f"{name}.png").read_bytes()
+
+
+BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable", "chrome",
+            "chrome-headless-shell")  # fmt: skip
+
+
+@pytest.mark.slow
+def test_index_html_alone_shows_its_plots_in_a_headless_browser(workspace_report,
+                                                                tmp_path) -> None:  # fmt: skip
+    """The page copied alone into an empty folder, screenshotted by a headless Chromium at 100%:
+    the curves' colours are on screen, which a broken image (the page before issue 21) lacks."""
+    from PIL import Image
+
+    browser = next((path for name in BROWSERS if (path := shutil.which(name))), None)
+    if browser is None:
+        pytest.skip(f"no headless browser on PATH ({', '.join(BROWSERS)}): the page is not "
+                    "screenshotted (apt-get install chromium)")
+    ws, _ = workspace_report
+    page = tmp_path / "alone" / "index.html"
+    page.parent.mkdir()
+    shutil.copy(ws / "report" / "index.html", page)
+    shot = tmp_path / "shot.png"
+    subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+                    "--force-device-scale-factor=1", "--window-size=1280,9000",
+                    f"--screenshot={shot}", page.as_uri()],
+                   capture_output=True, timeout=180, check=True)  # fmt: skip
+    image = np.asarray(Image.open(shot).convert("RGB"), dtype=int)
+    assert image.shape[1] == 1280
+    # matplotlib's tab:blue (left side) and tab:red (right side), drawn only in the plots.
+    for rgb in ((31, 119, 180), (214, 39, 40)):
+        pixels = int((np.abs(image - rgb).sum(axis=-1) < 40).sum())
+        assert pixels > 3000, (rgb, pixels)
+
+
+def test_angle_table_leaves_out_what_the_model_cannot_move(workspace_report) -> None:
+    """Hinges (neck, elbows, knees) get one grey cell, not abduction and rotation columns of
+    zeros; the other joints keep all six numbers."""
+    ws, result = workspace_report
+    page = _Page((ws / "report" / "index.html").read_text())
+    table = next(t for t in page.tables if t[0][1][0] == "flexion min")
+    rows = {row[0][0]: row[1:] for row in table[1:]}
+    assert list(rows) == list(ANGLE_JOINTS)
+    for joint, cells in rows.items():
+        width = sum(int(attrs.get("colspan") or 1) for _, attrs in cells)
+        numbers = [float(text) for text, attrs in cells if attrs.get("class") != "nodof"]
+        assert width == 6 and len(numbers) == 2 * len(MODEL_ANGLES[joint]), joint
+        if len(MODEL_ANGLES[joint]) == 1:
+            assert cells[2][0] == "no abduction or rotation in the body model", joint
+    knee = result.summary["angles"]["l_knee"]["flexion"]
+    assert [float(t) for t, _ in rows["l_knee"][:2]] == pytest.approx(
+        [knee["min"], knee["max"]], abs=0.051)
+
+
+def test_shown_angles_are_the_models_and_whatever_else_moves() -> None:
+    angles = np.zeros((5, len(ANGLE_JOINTS), 3))
+    assert shown_angles(angles) == MODEL_ANGLES
+    elbow = ANGLE_JOINTS.index("l_elbow")
+    angles[3, elbow, ANGLE_NAMES.index("rotation")] = np.radians(2.0)
+    angles[0] = np.nan
+    shown = shown_angles(angles)
+    assert shown["l_elbow"] == ("flexion", "rotation") and shown["r_elbow"] == ("flexion",)
+
+
+def test_plot_text_is_readable_at_100_percent_and_legends_stay_off_the_plots(
+    workspace_report,
+) -> None:  # fmt: skip
+    """Every text of the figures is at least 12 px high at the PNG's resolution (the page
+    shows the 1,200 px images at about their size), and no legend covers a plot."""
+    import matplotlib.text
+
+    ws, _ = workspace_report
+    kin, loads, _ = analyse(read_pose_track(ws / "tracks" / "pose.json"), ReportConfig())
+    figures = [grid_figure(kin, ("pelvis", "elbow", "knee"), ANGLE_JOINTS,
+                           np.degrees(kin.joint_angles), "deg", "Joint angles",
+                           shown_angles(kin.joint_angles)),
+               com_figure(kin, loads)]  # fmt: skip
+    for fig in figures:
+        fig.set_dpi(PLOT_DPI)
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        legends = [*fig.legends, *(ax.get_legend() for ax in fig.axes if ax.get_legend())]
+        assert legends
+        for legend in legends:
+            box = legend.get_window_extent(renderer)
+            assert not any(box.overlaps(ax.get_window_extent(renderer)) for ax in fig.axes)
+        texts = [t for t in fig.findobj(matplotlib.text.Text) if t.get_visible() and t.get_text()]
+        sizes_px = [t.get_fontsize() * PLOT_DPI / 72 for t in texts]
+        assert min(sizes_px) >= 12.0, min(sizes_px)
+        assert fig.get_figwidth() * PLOT_DPI == 1200
+    import matplotlib.pyplot as plt
+
+    for fig in figures:
+        plt.close(fig)
 
 
 def test_recording_has_curves_and_skeleton_on_the_tracking_timelines(workspace_report) -> None:
@@ -214,9 +456,18 @@ def test_a_single_pose_is_no_motion_to_report(tmp_path: Path) -> None:
 
 def test_cli_reports_a_workspace(tmp_path: Path) -> None:
     write_pose_track(tmp_path / "ws", walking_params(40))
-    ok = run_cli("report", tmp_path / "ws", "--cutoff-hz", "5", "--plot-format", "svg")
+    ok = run_cli("report", tmp_path / "ws", "--cutoff-hz", "5", "--plot-format", "svg",
+                 "--marker-set", "ours")
     assert ok.returncode == 0, ok.stderr
-    assert "cut-off 5 Hz" in ok.stdout and (tmp_path / "ws/report/joint_angles.svg").is_file()
+    report = tmp_path / "ws/report"
+    assert "cut-off 5 Hz" in ok.stdout and (report / "joint_angles.svg").is_file()
+    # SVG plots are embedded too, as data URIs.
+    images = _Page((report / "index.html").read_text()).images
+    assert [src.partition(",")[0] for src in images] == ["data:image/svg+xml;base64"] * 4
+    assert base64.b64decode(images[0].partition(",")[2]) == (
+        report / "joint_angles.svg").read_bytes()
+    # Our own marker names: all 16 joints.
+    assert list(trc_markers(report / "motion.trc")) == list(NODE_NAMES)
 
 
 @pytest.mark.parametrize(("args", "message"), [
@@ -270,10 +521,27 @@ def test_cmu_walk_round_trip_matches_the_clip(walk_report) -> None:
                          if r["joint"] == f"{side}_knee" and r["angle"] == "flexion"])
         # Degrees; the retargeting fits a hinge knee to the clip's 3-DOF one (20 mm RMS).
         assert np.abs(ours - clip).max() < 6.0, side
-    # The pelvis marker sits at the clip's hip midpoint, in the clip's own (Y-up) world.
-    data = (report / "motion.trc").read_text().splitlines()[6:]
-    pelvis = np.array([[float(v) for v in line.split("\t")[2:5]] for line in data])
-    assert np.linalg.norm(pelvis - truth["pelvis"], axis=1).max() < 0.03  # metres
+    # The pelvis marker (Pose2Sim's Hip) sits at the clip's hip midpoint, in the clip's own
+    # (Y-up) world.
+    hip = trc_markers(report / "motion.trc")["Hip"]
+    assert np.linalg.norm(hip - truth["pelvis"], axis=1).max() < 0.03  # metres
+
+
+@pytest.mark.shared_data
+def test_cmu_walk_files_carry_the_nominal_120_hz(walk_report) -> None:
+    """Issue 21: CMU's frame time 0.008333 s is 120.0048 Hz, and the TRC read 120.005."""
+    walk, result = walk_report
+    assert read_bvh(walk).frame_time_s == 0.008333
+    lines = (result.report_dir / "motion.trc").read_text().splitlines()
+    assert lines[2].split("\t")[:3] == ["120", "120", str(FRAMES)]
+    assert lines[2].split("\t")[5] == "120"
+    times = [float(line.split("\t")[1]) for line in lines[6:]]
+    np.testing.assert_allclose(np.diff(times), 1 / 120, atol=1.5e-6)  # 6 decimals in the file
+    mot = (result.report_dir / "motion.mot").read_text().splitlines()
+    first = mot.index("endheader") + 2
+    assert float(mot[first + 1].split("\t")[0]) - float(mot[first].split("\t")[0]) == (
+        pytest.approx(1 / 120, abs=1.5e-6))
+    assert result.summary["opensim"]["rate_hz"] == 120
 
 
 @pytest.mark.shared_data
