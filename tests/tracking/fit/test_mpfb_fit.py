@@ -92,11 +92,11 @@ def test_cli_mpfb_fit_of_a_box_fails_and_still_writes_the_body(tmp_path):
 def _real_pose(clip: str, frame: int) -> Pose:
     """Frame `frame` of a CMU clip on our skeleton, turned as benchmarks/body_fit.py turns it."""
     from tests.helpers import shared_dataset
-    from tracking.body.bvh import CMU_METRES_PER_UNIT, read_bvh
+    from tracking.body.bvh import read_bvh
     from tracking.body.retarget import retarget
 
     motion = read_bvh(shared_dataset("mocap_bvh") / clip)
-    pose = retarget(motion, CMU_METRES_PER_UNIT, [frame]).poses[0]
+    pose = retarget(motion, None, [frame]).poses[0]  # in the clip naming's unit
     angle = np.random.default_rng(frame).uniform(-np.pi, np.pi)
     c, s = np.cos(angle), np.sin(angle)
     return pose_in_frame(pose, np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]]))
