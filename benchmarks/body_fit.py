@@ -269,8 +269,10 @@ def main() -> None:
     parser.add_argument("--clips", choices=tuple(CLIP_SETS), default="tuned",
                         help="the real-pose section's clips: those the fit was developed on "
                         "(walk, run, wave, bend and pick up), held out until session 16 "
-                        "(dance, squat, boxing, jump, cartwheel), or never looked at (arms "
-                        "overhead, pirouette, start-walk-stop)")  # fmt: skip
+                        "(dance, squat, boxing, jump, cartwheel), never looked at until "
+                        "session 18 (arms overhead, pirouette, start-walk-stop), or the "
+                        "Daz-style clips first read in session 19 (kick, sit-stand, "
+                        "climb)")  # fmt: skip
     parser.add_argument("--bodies", nargs="+", choices=tuple(FITTERS),
                         default=["superquadric", "mpfb"],
                         help="the fitters of the real-pose section (mpfb-24: mpfb without "

@@ -48,7 +48,6 @@ from recon.workspace import (
     fingerprint,
     write_json_atomic,
 )
-from tracking.body.bvh import CMU_METRES_PER_UNIT
 from tracking.body.model import BONES, N_POSE_PARAMS, NODE_NAMES, pose_params_problem
 from tracking.body.motion import read_pose_file
 from tracking.report.anthropometry import Sex, body_segments, default_body_mass
@@ -109,9 +108,10 @@ class ReportConfig:
     max_frames: int | None = field(
         default=None, metadata={"help": "report only the first N frames (quick looks)"}
     )
-    metres_per_unit: float = field(
-        default=CMU_METRES_PER_UNIT,
-        metadata={"help": "BVH length unit in metres (CMU clips: 0.0254/0.45)"},
+    metres_per_unit: float | None = field(
+        default=None,
+        metadata={"help": "BVH length unit in metres (default: its naming's; CMU: 0.0254/0.45, "
+                  "Daz-style: 0.01)"},
     )
     plot_format: PlotFormat = field(
         default=PlotFormat.PNG, metadata={"help": "format of the plots in the HTML report"}
@@ -140,7 +140,7 @@ class ReportConfig:
             raise UserError(f"--body-mass-kg must be positive, got {self.body_mass_kg}")
         if self.max_frames is not None and self.max_frames < 1:
             raise UserError(f"--max-frames must be at least 1, got {self.max_frames}")
-        if not self.metres_per_unit > 0:
+        if self.metres_per_unit is not None and not self.metres_per_unit > 0:
             raise UserError(f"--metres-per-unit must be positive, got {self.metres_per_unit}")
 
     def as_dict(self) -> dict[str, Any]:
@@ -206,7 +206,7 @@ class ReportSummary:
 
 
 def sequence_from_bvh(
-    path: Path, metres_per_unit: float = CMU_METRES_PER_UNIT, max_frames: int | None = None
+    path: Path, metres_per_unit: float | None = None, max_frames: int | None = None
 ) -> tuple[MotionSequence, str]:
     """A BVH clip retargeted onto the body model (world axes and frame rate of the clip).
 
