@@ -398,18 +398,23 @@ def log_skeleton_frames(
         )
 
 
+SKELETON_RGB: tuple[int, int, int] = (30, 110, 230)
+"""The colour of a skeleton's joints and bones: blue, apart from the skin-toned body mesh."""
+
+
 def log_skeleton_context(
     rec: rr.RecordingStream, entity: str, names: Sequence[str],
     connections: Sequence[tuple[int, int]], class_id: int = 0, label: str = "body",
+    color: tuple[int, int, int] = SKELETON_RGB,
 ) -> None:  # fmt: skip
     """The keypoint names and bone connections of a skeleton class, as a static
     `AnnotationContext` on `entity`: points logged below it with that class id and keypoint ids
-    are drawn labelled and connected (Rerun's human_pose_tracking convention)."""
+    are drawn labelled, connected and in ``color`` (Rerun's human_pose_tracking convention)."""
     rec.log(
         entity,
         rr.AnnotationContext([
             rr.ClassDescription(
-                info=rr.AnnotationInfo(id=class_id, label=label),
+                info=rr.AnnotationInfo(id=class_id, label=label, color=color),
                 keypoint_annotations=[rr.AnnotationInfo(id=i, label=name)
                                       for i, name in enumerate(names)],
                 keypoint_connections=[(int(a), int(b)) for a, b in connections],
@@ -495,21 +500,33 @@ XOR_CLASSES = ((0, "neither", (0, 0, 0)), (1, "model only", (230, 60, 60)),
                (2, "image only", (60, 120, 240)), (3, "both", (200, 200, 200)))  # fmt: skip
 
 
+def log_xor_context(rec: rr.RecordingStream, entity: str = "world/cameras") -> None:
+    """Static colours and labels of the XOR classes, for every overlay logged below ``entity``:
+    logged once, before the overlays (re-logged between frames, the viewer fell back to its
+    automatic palette and "Label 0" ... "Label 3", rerun 0.41)."""
+    rec.log(entity, rr.AnnotationContext([rr.AnnotationInfo(id=i, label=label, color=color)
+                                          for i, label, color in XOR_CLASSES]),
+            static=True)  # fmt: skip
+
+
 def log_xor_overlay(
     rec: rr.RecordingStream, entity: str, model: np.ndarray, image: np.ndarray, frame: int,
     time_s: float,
 ) -> None:  # fmt: skip
     """Model and image silhouettes (H, W) bool as one `SegmentationImage` (class = model +
-    2 * image, so XOR pixels are classes 1 and 2), with its own static `AnnotationContext`."""
-    rec.log(entity, rr.AnnotationContext([rr.AnnotationInfo(id=i, label=label, color=color)
-                                          for i, label, color in XOR_CLASSES]),
-            static=True)  # fmt: skip
+    2 * image, so XOR pixels are classes 1 and 2); its classes are `log_xor_context`'s, logged
+    once on an ancestor of ``entity``."""
     ids = (np.asarray(model, bool).astype(np.uint8) + 2 * np.asarray(image, bool)).astype(np.uint8)
     _log_segmentation_frame(rec, entity, ids, frame, time_s)
 
 
-BODY_COLOUR_RGBA: tuple[int, int, int, int] = (222, 184, 150, 255)
-"""The albedo of a tracked or synthetic body mesh in a recording (a skin tone)."""
+BODY_COLOUR_RGBA: tuple[int, int, int, int] = (222, 184, 150, 110)
+"""The albedo of a tracked or synthetic body mesh in a recording: a skin tone, see-through
+(alpha 110 of 255), so that the skeleton inside it shows."""
+
+SKELETON_RADIUS_M = 0.025
+"""Joint radius of a tracked skeleton, drawn inside its see-through body mesh: 2.5 cm, so that
+the joints show."""
 
 
 def log_mesh_frame(
@@ -532,7 +549,7 @@ def log_skeleton_frame(
 ) -> None:  # fmt: skip
     """`log_skeleton` of one frame on the ``frame`` and ``time`` timelines."""
     with _at_frame(rec, frame, time_s):
-        log_skeleton(rec, entity, points_in_world)
+        log_skeleton(rec, entity, points_in_world, radius=SKELETON_RADIUS_M)
 
 
 def log_frame_scalar(rec: rr.RecordingStream, entity: str, value: float, frame: int,
