@@ -17,7 +17,12 @@ Conventions, stated once here and used everywhere:
   ``Pinhole`` is scaled to match, so that rays still hit the same pixels. Lens distortion is not
   modelled by ``Pinhole``: the photo is shown as captured.
 - Anything constant (cameras, photos, the final model) is logged ``static=True``; progress
-  curves go on sequence timelines (``image``, ``pair``, ``registration``).
+  curves go on sequence timelines (``image``, ``pair``, ``registration``), one timeline per
+  recording's curves, so that the timeline its blueprint shows holds every curve (values per
+  item that are not a progress, such as each image's reprojection error, are bar charts).
+- Each step's recording carries its default blueprint (`BLUEPRINTS`), the layout the viewer
+  opens it with, and its own application id (``mocap-<step>``): the viewer shares one blueprint
+  between the recordings of an application id, and `mocap view` opens them all at once.
 """
 
 from __future__ import annotations
@@ -28,12 +33,13 @@ import os
 import re
 import tempfile
 import threading
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 
 import cv2
 import numpy as np
 import rerun as rr
+import rerun.blueprint as rrb
 
 from recon.workspace import atomic_output
 
@@ -41,21 +47,41 @@ APP_ID = "mocap"
 MAX_LOGGED_IMAGE_SIZE = 1024
 
 
+def application_id(step: str) -> str:
+    """The application id of a step's recordings: one per step, because the viewer gives every
+    recording of an application id the same blueprint."""
+    return f"{APP_ID}-{step}"
+
+
+_logged_cameras: dict[int, list[str]] = {}
+"""The camera entities (``world/cameras/<name>``) logged so far into each open step recording
+(by ``id`` of its stream), which its blueprint lays out."""
+
+
 @contextlib.contextmanager
 def step_recording(path: Path, step: str) -> Iterator[rr.RecordingStream]:
-    """A recording stream saved atomically to ``path``.
+    """A recording stream saved atomically to ``path``, with the step's default blueprint
+    (`BLUEPRINTS`) sent when the block ends without an error.
 
     Raises :class:`~recon.errors.UserError` when the file cannot be written in full (a full
     disk), after the block; ``path`` is then left as it was.
     """
     with atomic_output(path) as tmp, _checked_sink(tmp, path) as sink:
-        rec = rr.RecordingStream(APP_ID, recording_id=f"{step}-{path.parent.parent.name}")
+        rec = rr.RecordingStream(application_id(step),
+                                 recording_id=f"{step}-{path.parent.parent.name}")
         rec.save(sink)
         rec.send_recording_name(step)
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Y_DOWN, static=True)
+        _logged_cameras[id(rec)] = []
         try:
             yield rec
+            # Sent last, as it lays out the cameras the step logged: a blueprint is a store of
+            # its own in the file, so its place in the stream does not matter.
+            blueprint = default_blueprint(step, _logged_cameras[id(rec)])
+            if blueprint is not None:
+                rec.send_blueprint(blueprint, make_active=True, make_default=True)
         finally:
+            _logged_cameras.pop(id(rec), None)
             try:
                 rec.flush()
             finally:
@@ -232,6 +258,8 @@ def log_camera_image(
     ``K`` is the 3x3 calibration in pixels of the full-size image.
     """
     base = f"world/cameras/{entity_name(image_name)}"
+    if base not in (logged := _logged_cameras.get(id(rec), [])):
+        logged.append(base)
     if cam_from_world is not None:
         rec.log(
             base,
@@ -306,6 +334,12 @@ def log_series(
         rec.set_time(timeline, sequence=i)
         rec.log(entity, rr.Scalars(float(value)))
     rec.reset_time()
+
+
+def log_bars(rec: rr.RecordingStream, entity: str, values: Sequence[float]) -> None:
+    """Values per item (index 0..N-1) as a static bar chart: unlike a curve on a timeline, it
+    shows whichever timeline the viewer is on."""
+    rec.log(entity, rr.BarChart(np.asarray(values, dtype=float)), static=True)
 
 
 def log_table(rec: rr.RecordingStream, entity: str, title: str, rows: Sequence[Mapping]) -> None:
@@ -556,6 +590,163 @@ def log_frame_scalar(rec: rr.RecordingStream, entity: str, value: float, frame: 
                      time_s: float) -> None:  # fmt: skip
     with _at_frame(rec, frame, time_s):
         rec.log(entity, rr.Scalars(float(value)))
+
+
+# Default blueprints ---------------------------------------------------------------------------
+# One builder per step, registered here and sent by `step_recording`; README.md ("Recordings")
+# describes each in one line. A builder takes the camera entities the step logged
+# (``world/cameras/<name>``, in logging order).
+BlueprintBuilder = Callable[[Sequence[str]], rrb.Blueprint]
+BLUEPRINTS: dict[str, BlueprintBuilder] = {}
+
+MAX_CAMERA_VIEWS = 16
+"""At most this many 2D views of cameras in a layout (the first ones): a view per photo of a
+200-photo model would make the viewer crawl; the 3D view shows them all."""
+
+
+def _blueprint(*steps: str) -> Callable[[BlueprintBuilder], BlueprintBuilder]:
+    def register(builder: BlueprintBuilder) -> BlueprintBuilder:
+        for step in steps:
+            BLUEPRINTS[step] = builder
+        return builder
+
+    return register
+
+
+def default_blueprint(step: str, cameras: Sequence[str] = ()) -> rrb.Blueprint | None:
+    """The layout the viewer opens ``step``'s recording with (None: the viewer's automatic one,
+    for a step without a builder)."""
+    builder = BLUEPRINTS.get(step)
+    return None if builder is None else builder(list(cameras))
+
+
+def _camera_views(cameras: Sequence[str]) -> list[rrb.Spatial2DView]:
+    """One 2D view per camera, in its image (the ``Pinhole``) with everything logged below it."""
+    return [rrb.Spatial2DView(origin=f"{camera}/image", name=camera.rsplit("/", 1)[-1])
+            for camera in cameras[:MAX_CAMERA_VIEWS]]  # fmt: skip
+
+
+def _layout(*parts: rrb.BlueprintPart) -> rrb.Blueprint:
+    # Views are chosen by the step: the viewer adds none of its own (its automatic views once
+    # showed an empty `world/cameras` space with an error).
+    return rrb.Blueprint(*parts, auto_views=False, auto_layout=False)
+
+
+@_blueprint("features")
+def _features(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(rrb.Horizontal(rrb.Tabs(*_camera_views(cameras), name="photos"),
+                                  rrb.TimeSeriesView(origin="stats", name="keypoints per image"),
+                                  column_shares=[3, 1]),  # fmt: skip
+                   rrb.TimePanel(timeline="image"))
+
+
+@_blueprint("matches")
+def _matches(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(rrb.Vertical(rrb.TimeSeriesView(origin="stats", name="inliers per pair"),
+                                rrb.TextDocumentView(origin="tables/pairs", name="pairs")),
+                   rrb.TimePanel(timeline="pair"))
+
+
+@_blueprint("intrinsics")
+def _intrinsics(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(rrb.TextDocumentView(origin="tables/intrinsics", name="focal priors"))
+
+
+@_blueprint("mapping")
+def _mapping(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(
+        rrb.Horizontal(
+            rrb.Spatial3DView(origin="world", name="sparse model"),
+            rrb.Vertical(
+                rrb.TimeSeriesView(origin="stats/registered_images", name="registered images"),
+                rrb.BarChartView(origin="stats/reprojection_error_px",
+                                 name="reprojection error per image (px)"),
+                rrb.TextDocumentView(origin="tables/images", name="images")),
+            column_shares=[2, 1]),
+        rrb.TimePanel(timeline="registration"))  # fmt: skip
+
+
+@_blueprint("dense")
+def _dense(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(rrb.Spatial3DView(origin="world", name="dense cloud"))
+
+
+@_blueprint("mesh")
+def _mesh(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(rrb.Spatial3DView(origin="world", name="mesh"))
+
+
+@_blueprint("compare")
+def _compare(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(
+        rrb.Horizontal(
+            rrb.TextDocumentView(origin="tables/methods", name="focal by method"),
+            rrb.Vertical(rrb.TimeSeriesView(origin="kruppa", name="Kruppa focal per pair (px)"),
+                         rrb.TextDocumentView(origin="tables/pairs", name="Kruppa pairs"))),
+        rrb.TimePanel(timeline="pair"))  # fmt: skip
+
+
+def _frame_panel() -> rrb.TimePanel:
+    return rrb.TimePanel(timeline=FRAME_TIMELINE)
+
+
+@_blueprint("synth")
+def _synth(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(rrb.Horizontal(rrb.Spatial3DView(origin="world", name="truth and cameras"),
+                                  rrb.Grid(*_camera_views(cameras), name="silhouettes")),
+                   _frame_panel())  # fmt: skip
+
+
+@_blueprint("silhouettes")
+def _silhouettes(cameras: Sequence[str]) -> rrb.Blueprint:
+    backgrounds = [rrb.Spatial2DView(origin=f"backgrounds/{camera.rsplit('/', 1)[-1]}",
+                                     name=f"{camera.rsplit('/', 1)[-1]} background")
+                   for camera in cameras[:MAX_CAMERA_VIEWS]]  # fmt: skip
+    return _layout(
+        rrb.Vertical(
+            rrb.Grid(*_camera_views(cameras), name="frames and silhouettes"),
+            rrb.Horizontal(
+                rrb.TimeSeriesView(origin="silhouettes", name="foreground fraction"),
+                rrb.Tabs(rrb.TextDocumentView(origin="silhouettes/summary", name="summary"),
+                         rrb.Grid(*backgrounds, name="backgrounds"),
+                         rrb.Spatial3DView(origin="world", name="cameras"))),
+            row_shares=[2, 1]),
+        _frame_panel())  # fmt: skip
+
+
+@_blueprint("track")
+def _track(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(
+        rrb.Horizontal(
+            rrb.Vertical(
+                rrb.Spatial3DView(origin="world", name="body over the cameras"),
+                rrb.Horizontal(rrb.TimeSeriesView(origin="track/energy_px", name="energy (px)"),
+                               rrb.TimeSeriesView(origin="track/xor_fraction",
+                                                  name="XOR fraction of the silhouette")),
+                row_shares=[3, 1]),
+            rrb.Grid(*_camera_views(cameras), name="XOR per camera"),
+            column_shares=[3, 2]),
+        _frame_panel())  # fmt: skip
+
+
+@_blueprint("report")
+def _report(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(
+        rrb.Horizontal(
+            rrb.Spatial3DView(origin="world", name="skeleton and centre of mass"),
+            rrb.Tabs(rrb.TimeSeriesView(origin="report/joint_angles", name="joint angles (deg)"),
+                     rrb.TimeSeriesView(origin="report/joint_moments",
+                                        name="joint moments (N m)"),
+                     rrb.TimeSeriesView(origin="report/center_of_mass",
+                                        name="centre of mass (m, m/s)"))),
+        _frame_panel())  # fmt: skip
+
+
+@_blueprint("fit")
+def _fit(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(rrb.Horizontal(rrb.Spatial3DView(origin="world", name="body in the cloud"),
+                                  rrb.TextDocumentView(origin="fit", name="body fit"),
+                                  column_shares=[3, 1]))  # fmt: skip
 
 
 def viewer_command(recordings: Sequence[Path]) -> list[str]:

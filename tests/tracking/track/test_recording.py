@@ -115,3 +115,16 @@ def test_the_body_mesh_shades_and_shows_the_skeleton(tracked):
     assert body["class_description"]["info"]["color"] is not None  # not the automatic palette
     assert len(body["class_description"]["keypoint_connections"]) >= 15  # the bones
 
+
+def test_the_blueprint_shows_body_cameras_and_energy_on_the_frame_timeline(tracked):
+    _, rec = tracked
+    assert rec.application_id == "mocap-track"
+    assert rec.timeline == "frame"
+    kinds = {(v["kind"], v["origin"]) for v in rec.views}
+    assert ("3D", "world") in kinds
+    assert {("2D", f"world/cameras/{c}/image") for c in CAMERAS} <= kinds
+    assert ("TimeSeries", "track/energy_px") in kinds
+    assert rec.layout_problems() == []
+    # What the views show is on the frame timeline, one row per tracked frame.
+    assert rec.rows("track/energy_px", "frame") == list(range(FRAMES))
+    assert rec.rows("world/body/mesh", "frame") == list(range(FRAMES))
