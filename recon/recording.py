@@ -749,13 +749,26 @@ def _fit(cameras: Sequence[str]) -> rrb.Blueprint:
                                   column_shares=[3, 1]))  # fmt: skip
 
 
-def viewer_command(recordings: Sequence[Path]) -> list[str]:
-    """The command that opens recordings in the Rerun viewer (shipped in the rerun-sdk wheel)."""
+LOOPBACK = "127.0.0.1"
+
+
+def viewer_command(recordings: Sequence[Path], bind: str = LOOPBACK) -> list[str]:
+    """The command that opens recordings in the Rerun viewer (shipped in the rerun-sdk wheel),
+    its server listening on ``bind`` only: rerun 0.41 binds 0.0.0.0 (every interface) unless
+    told otherwise, which serves the recordings to the whole network."""
+    import ipaddress
     import shutil
     import sys
 
+    from recon.errors import UserError
+
+    try:
+        address = str(ipaddress.ip_address(bind))
+    except ValueError:
+        raise UserError(f"--bind {bind}: not an IP address (e.g. 127.0.0.1, 0.0.0.0, ::)"
+                        ) from None
     exe = shutil.which("rerun") or str(Path(sys.executable).with_name("rerun"))
-    return [exe, *map(str, recordings)]
+    return [exe, "--bind", address, *map(str, recordings)]
 
 
 def has_display() -> bool:
@@ -767,11 +780,11 @@ def has_display() -> bool:
     )
 
 
-def open_viewer(recordings: Sequence[Path]) -> list[str] | None:
+def open_viewer(recordings: Sequence[Path], bind: str = LOOPBACK) -> list[str] | None:
     """Start the viewer in the background when there is a display; else return its command."""
     import subprocess
 
-    command = viewer_command(recordings)
+    command = viewer_command(recordings, bind)
     if not has_display():
         return command
     subprocess.Popen(command, start_new_session=True)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 
@@ -157,3 +158,43 @@ def test_camera_views_are_capped_for_large_models(tmp_path):
     assert sorted(v["name"] for v in views) == [f"img_{i:03d}_jpg" for i in range(MAX_CAMERA_VIEWS)]
     assert rec.timeline == "image"
 
+
+def test_the_viewer_listens_on_loopback_only(tmp_path):
+    """Issue 21: started by hand, rerun 0.41's viewer served 0.0.0.0:9876. The command `mocap
+    view` runs, started headless (no window: the same server) on a free port, listens on
+    127.0.0.1 only."""
+    import contextlib
+    import signal
+    import subprocess
+    import time
+
+    psutil = pytest.importorskip("psutil")
+    from recon.recording import viewer_command
+
+    path = tmp_path / "logs" / "test.rrd"
+    path.parent.mkdir()
+    _log_points(path, 0)
+    command = [*viewer_command([path]), "--headless", "--port", "auto", "--web-viewer-port", "0"]
+    # `rerun` of the wheel is a Python script that runs the binary as its child: both in a
+    # session of their own, ended together.
+    viewer = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                              start_new_session=True,
+                              env={**os.environ, "RERUN_ANALYTICS": "0"})  # fmt: skip
+    try:
+        addresses: set[str] = set()
+        deadline = time.monotonic() + 30.0  # seconds; it listens after about 1 s here
+        while not addresses and viewer.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.2)
+            with contextlib.suppress(psutil.NoSuchProcess):
+                wrapper = psutil.Process(viewer.pid)
+                addresses = {c.laddr.ip
+                             for p in [wrapper, *wrapper.children(recursive=True)]
+                             for c in p.net_connections("tcp") if c.status == psutil.CONN_LISTEN}
+        if viewer.poll() is not None:
+            pytest.skip("the headless viewer does not start here: "
+                        + viewer.stderr.read().decode(errors="replace")[-300:])
+        assert addresses == {"127.0.0.1"}
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(viewer.pid, signal.SIGKILL)
+        viewer.wait(timeout=10)
