@@ -462,11 +462,13 @@ def log_skeleton(
     rec: rr.RecordingStream, entity: str, points_in_world: np.ndarray, class_id: int = 0,
     radius: float = 0.015, static: bool = False,
 ) -> None:  # fmt: skip
-    """Joint positions (N, 3) as keypoints 0..N-1 of `class_id` (see `log_skeleton_context`)."""
+    """Joint positions (N, 3) as keypoints 0..N-1 of `class_id` (see `log_skeleton_context`),
+    their names shown on hover only: 16 labels drawn at once hid the body (issue 21)."""
     points = np.asarray(points_in_world, dtype=np.float32)
     rec.log(
         entity,
-        rr.Points3D(points, radii=radius, class_ids=class_id, keypoint_ids=np.arange(len(points))),
+        rr.Points3D(points, radii=radius, class_ids=class_id, keypoint_ids=np.arange(len(points)),
+                    show_labels=False),
         static=static,
     )
 

@@ -110,6 +110,8 @@ def test_the_body_mesh_shades_and_shows_the_skeleton(tracked):
         assert (colour & 0xFF) < 128
     radii = rec.rows("world/body/skeleton", "Points3D:radii", static=False)
     assert len(radii) == FRAMES and all(min(r) >= 0.02 for r in radii)  # metres
+    # Its 16 joint names on hover, not drawn over the body.
+    assert rec.rows("world/body/skeleton", "Points3D:show_labels") == [[False]] * FRAMES
     ((context,),) = rec.rows("world/body/skeleton", "AnnotationContext:context", static=True)
     (body,) = context
     assert body["class_description"]["info"]["color"] is not None  # not the automatic palette
