@@ -443,7 +443,8 @@ def log_skeleton_context(
 ) -> None:  # fmt: skip
     """The keypoint names and bone connections of a skeleton class, as a static
     `AnnotationContext` on `entity`: points logged below it with that class id and keypoint ids
-    are drawn labelled, connected and in ``color`` (Rerun's human_pose_tracking convention)."""
+    are drawn connected, in ``color`` and named on hover (Rerun's human_pose_tracking
+    convention)."""
     rec.log(
         entity,
         rr.AnnotationContext([
@@ -538,8 +539,8 @@ XOR_CLASSES = ((0, "neither", (0, 0, 0)), (1, "model only", (230, 60, 60)),
 
 def log_xor_context(rec: rr.RecordingStream, entity: str = "world/cameras") -> None:
     """Static colours and labels of the XOR classes, for every overlay logged below ``entity``:
-    logged once, before the overlays (re-logged between frames, the viewer fell back to its
-    automatic palette and "Label 0" ... "Label 3", rerun 0.41)."""
+    logged once, before the overlays (issue 21 saw the viewer's own palette and "Label 0" ...
+    "Label 3" when the context was re-logged between frames)."""
     rec.log(entity, rr.AnnotationContext([rr.AnnotationInfo(id=i, label=label, color=color)
                                           for i, label, color in XOR_CLASSES]),
             static=True)  # fmt: skip
@@ -602,8 +603,8 @@ BlueprintBuilder = Callable[[Sequence[str]], rrb.Blueprint]
 BLUEPRINTS: dict[str, BlueprintBuilder] = {}
 
 MAX_CAMERA_VIEWS = 16
-"""At most this many 2D views of cameras in a layout (the first ones): a view per photo of a
-200-photo model would make the viewer crawl; the 3D view shows them all."""
+"""At most this many 2D views of cameras in a layout (the first ones): a tab per photo of a
+200-photo model is no overview; the 3D view shows them all."""
 
 
 def _blueprint(*steps: str) -> Callable[[BlueprintBuilder], BlueprintBuilder]:
