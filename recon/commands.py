@@ -289,6 +289,9 @@ class ViewCommand:
 
     def add_arguments(self, parser: argparse.ArgumentParser) -> None:
         parser.add_argument("workspace", type=Path, metavar="WS", help="workspace folder")
+        parser.add_argument("--bind", metavar="ADDRESS", default="127.0.0.1",
+                            help="address the viewer's server listens on (default: 127.0.0.1, "
+                                 "this machine only; 0.0.0.0 serves every network interface)")
 
     def run(self, args: argparse.Namespace) -> None:
         from recon.recording import open_viewer
@@ -298,7 +301,7 @@ class ViewCommand:
         recordings = ws.recordings()
         if not recordings:
             raise UserError(f"{ws.logs_dir} holds no recordings yet; run `mocap sfm {ws.root}`")
-        command = open_viewer(recordings)
+        command = open_viewer(recordings, bind=args.bind)
         if command is None:
             print(f"opened {len(recordings)} recording(s) in the Rerun viewer")
         else:

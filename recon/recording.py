@@ -17,7 +17,12 @@ Conventions, stated once here and used everywhere:
   ``Pinhole`` is scaled to match, so that rays still hit the same pixels. Lens distortion is not
   modelled by ``Pinhole``: the photo is shown as captured.
 - Anything constant (cameras, photos, the final model) is logged ``static=True``; progress
-  curves go on sequence timelines (``image``, ``pair``, ``registration``).
+  curves go on sequence timelines (``image``, ``pair``, ``registration``), one timeline per
+  recording's curves, so that the timeline its blueprint shows holds every curve (values per
+  item that are not a progress, such as each image's reprojection error, are bar charts).
+- Each step's recording carries its default blueprint (`BLUEPRINTS`), the layout the viewer
+  opens it with, and its own application id (``mocap-<step>``): the viewer shares one blueprint
+  between the recordings of an application id, and `mocap view` opens them all at once.
 """
 
 from __future__ import annotations
@@ -28,12 +33,13 @@ import os
 import re
 import tempfile
 import threading
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 
 import cv2
 import numpy as np
 import rerun as rr
+import rerun.blueprint as rrb
 
 from recon.workspace import atomic_output
 
@@ -41,21 +47,41 @@ APP_ID = "mocap"
 MAX_LOGGED_IMAGE_SIZE = 1024
 
 
+def application_id(step: str) -> str:
+    """The application id of a step's recordings: one per step, because the viewer gives every
+    recording of an application id the same blueprint."""
+    return f"{APP_ID}-{step}"
+
+
+_logged_cameras: dict[int, list[str]] = {}
+"""The camera entities (``world/cameras/<name>``) logged so far into each open step recording
+(by ``id`` of its stream), which its blueprint lays out."""
+
+
 @contextlib.contextmanager
 def step_recording(path: Path, step: str) -> Iterator[rr.RecordingStream]:
-    """A recording stream saved atomically to ``path``.
+    """A recording stream saved atomically to ``path``, with the step's default blueprint
+    (`BLUEPRINTS`) sent when the block ends without an error.
 
     Raises :class:`~recon.errors.UserError` when the file cannot be written in full (a full
     disk), after the block; ``path`` is then left as it was.
     """
     with atomic_output(path) as tmp, _checked_sink(tmp, path) as sink:
-        rec = rr.RecordingStream(APP_ID, recording_id=f"{step}-{path.parent.parent.name}")
+        rec = rr.RecordingStream(application_id(step),
+                                 recording_id=f"{step}-{path.parent.parent.name}")
         rec.save(sink)
         rec.send_recording_name(step)
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Y_DOWN, static=True)
+        _logged_cameras[id(rec)] = []
         try:
             yield rec
+            # Sent last, as it lays out the cameras the step logged: a blueprint is a store of
+            # its own in the file, so its place in the stream does not matter.
+            blueprint = default_blueprint(step, _logged_cameras[id(rec)])
+            if blueprint is not None:
+                rec.send_blueprint(blueprint, make_active=True, make_default=True)
         finally:
+            _logged_cameras.pop(id(rec), None)
             try:
                 rec.flush()
             finally:
@@ -232,6 +258,8 @@ def log_camera_image(
     ``K`` is the 3x3 calibration in pixels of the full-size image.
     """
     base = f"world/cameras/{entity_name(image_name)}"
+    if base not in (logged := _logged_cameras.get(id(rec), [])):
+        logged.append(base)
     if cam_from_world is not None:
         rec.log(
             base,
@@ -306,6 +334,12 @@ def log_series(
         rec.set_time(timeline, sequence=i)
         rec.log(entity, rr.Scalars(float(value)))
     rec.reset_time()
+
+
+def log_bars(rec: rr.RecordingStream, entity: str, values: Sequence[float]) -> None:
+    """Values per item (index 0..N-1) as a static bar chart: unlike a curve on a timeline, it
+    shows whichever timeline the viewer is on."""
+    rec.log(entity, rr.BarChart(np.asarray(values, dtype=float)), static=True)
 
 
 def log_table(rec: rr.RecordingStream, entity: str, title: str, rows: Sequence[Mapping]) -> None:
@@ -398,18 +432,24 @@ def log_skeleton_frames(
         )
 
 
+SKELETON_RGB: tuple[int, int, int] = (30, 110, 230)
+"""The colour of a skeleton's joints and bones: blue, apart from the skin-toned body mesh."""
+
+
 def log_skeleton_context(
     rec: rr.RecordingStream, entity: str, names: Sequence[str],
     connections: Sequence[tuple[int, int]], class_id: int = 0, label: str = "body",
+    color: tuple[int, int, int] = SKELETON_RGB,
 ) -> None:  # fmt: skip
     """The keypoint names and bone connections of a skeleton class, as a static
     `AnnotationContext` on `entity`: points logged below it with that class id and keypoint ids
-    are drawn labelled and connected (Rerun's human_pose_tracking convention)."""
+    are drawn connected, in ``color`` and named on hover (Rerun's human_pose_tracking
+    convention)."""
     rec.log(
         entity,
         rr.AnnotationContext([
             rr.ClassDescription(
-                info=rr.AnnotationInfo(id=class_id, label=label),
+                info=rr.AnnotationInfo(id=class_id, label=label, color=color),
                 keypoint_annotations=[rr.AnnotationInfo(id=i, label=name)
                                       for i, name in enumerate(names)],
                 keypoint_connections=[(int(a), int(b)) for a, b in connections],
@@ -423,11 +463,13 @@ def log_skeleton(
     rec: rr.RecordingStream, entity: str, points_in_world: np.ndarray, class_id: int = 0,
     radius: float = 0.015, static: bool = False,
 ) -> None:  # fmt: skip
-    """Joint positions (N, 3) as keypoints 0..N-1 of `class_id` (see `log_skeleton_context`)."""
+    """Joint positions (N, 3) as keypoints 0..N-1 of `class_id` (see `log_skeleton_context`),
+    their names shown on hover only: 16 labels drawn at once hid the body (issue 21)."""
     points = np.asarray(points_in_world, dtype=np.float32)
     rec.log(
         entity,
-        rr.Points3D(points, radii=radius, class_ids=class_id, keypoint_ids=np.arange(len(points))),
+        rr.Points3D(points, radii=radius, class_ids=class_id, keypoint_ids=np.arange(len(points)),
+                    show_labels=False),
         static=static,
     )
 
@@ -495,21 +537,33 @@ XOR_CLASSES = ((0, "neither", (0, 0, 0)), (1, "model only", (230, 60, 60)),
                (2, "image only", (60, 120, 240)), (3, "both", (200, 200, 200)))  # fmt: skip
 
 
+def log_xor_context(rec: rr.RecordingStream, entity: str = "world/cameras") -> None:
+    """Static colours and labels of the XOR classes, for every overlay logged below ``entity``:
+    logged once, before the overlays (issue 21 saw the viewer's own palette and "Label 0" ...
+    "Label 3" when the context was re-logged between frames)."""
+    rec.log(entity, rr.AnnotationContext([rr.AnnotationInfo(id=i, label=label, color=color)
+                                          for i, label, color in XOR_CLASSES]),
+            static=True)  # fmt: skip
+
+
 def log_xor_overlay(
     rec: rr.RecordingStream, entity: str, model: np.ndarray, image: np.ndarray, frame: int,
     time_s: float,
 ) -> None:  # fmt: skip
     """Model and image silhouettes (H, W) bool as one `SegmentationImage` (class = model +
-    2 * image, so XOR pixels are classes 1 and 2), with its own static `AnnotationContext`."""
-    rec.log(entity, rr.AnnotationContext([rr.AnnotationInfo(id=i, label=label, color=color)
-                                          for i, label, color in XOR_CLASSES]),
-            static=True)  # fmt: skip
+    2 * image, so XOR pixels are classes 1 and 2); its classes are `log_xor_context`'s, logged
+    once on an ancestor of ``entity``."""
     ids = (np.asarray(model, bool).astype(np.uint8) + 2 * np.asarray(image, bool)).astype(np.uint8)
     _log_segmentation_frame(rec, entity, ids, frame, time_s)
 
 
-BODY_COLOUR_RGBA: tuple[int, int, int, int] = (222, 184, 150, 255)
-"""The albedo of a tracked or synthetic body mesh in a recording (a skin tone)."""
+BODY_COLOUR_RGBA: tuple[int, int, int, int] = (222, 184, 150, 110)
+"""The albedo of a tracked or synthetic body mesh in a recording: a skin tone, see-through
+(alpha 110 of 255), so that the skeleton inside it shows."""
+
+SKELETON_RADIUS_M = 0.025
+"""Joint radius of a tracked skeleton, drawn inside its see-through body mesh: 2.5 cm, so that
+the joints show."""
 
 
 def log_mesh_frame(
@@ -532,7 +586,7 @@ def log_skeleton_frame(
 ) -> None:  # fmt: skip
     """`log_skeleton` of one frame on the ``frame`` and ``time`` timelines."""
     with _at_frame(rec, frame, time_s):
-        log_skeleton(rec, entity, points_in_world)
+        log_skeleton(rec, entity, points_in_world, radius=SKELETON_RADIUS_M)
 
 
 def log_frame_scalar(rec: rr.RecordingStream, entity: str, value: float, frame: int,
@@ -541,13 +595,183 @@ def log_frame_scalar(rec: rr.RecordingStream, entity: str, value: float, frame: 
         rec.log(entity, rr.Scalars(float(value)))
 
 
-def viewer_command(recordings: Sequence[Path]) -> list[str]:
-    """The command that opens recordings in the Rerun viewer (shipped in the rerun-sdk wheel)."""
+# Default blueprints ---------------------------------------------------------------------------
+# One builder per step, registered here and sent by `step_recording`; README.md ("Recordings")
+# describes each in one line. A builder takes the camera entities the step logged
+# (``world/cameras/<name>``, in logging order).
+BlueprintBuilder = Callable[[Sequence[str]], rrb.Blueprint]
+BLUEPRINTS: dict[str, BlueprintBuilder] = {}
+
+MAX_CAMERA_VIEWS = 16
+"""At most this many 2D views of cameras in a layout (the first ones): a tab per photo of a
+200-photo model is no overview; the 3D view shows them all."""
+
+
+def _blueprint(*steps: str) -> Callable[[BlueprintBuilder], BlueprintBuilder]:
+    def register(builder: BlueprintBuilder) -> BlueprintBuilder:
+        for step in steps:
+            BLUEPRINTS[step] = builder
+        return builder
+
+    return register
+
+
+def default_blueprint(step: str, cameras: Sequence[str] = ()) -> rrb.Blueprint | None:
+    """The layout the viewer opens ``step``'s recording with (None: the viewer's automatic one,
+    for a step without a builder)."""
+    builder = BLUEPRINTS.get(step)
+    return None if builder is None else builder(list(cameras))
+
+
+def _camera_views(cameras: Sequence[str]) -> list[rrb.Spatial2DView]:
+    """One 2D view per camera, in its image (the ``Pinhole``) with everything logged below it."""
+    return [rrb.Spatial2DView(origin=f"{camera}/image", name=camera.rsplit("/", 1)[-1])
+            for camera in cameras[:MAX_CAMERA_VIEWS]]  # fmt: skip
+
+
+def _layout(*parts: rrb.BlueprintPart) -> rrb.Blueprint:
+    # Views are chosen by the step: the viewer adds none of its own (its automatic views once
+    # showed an empty `world/cameras` space with an error).
+    return rrb.Blueprint(*parts, auto_views=False, auto_layout=False)
+
+
+@_blueprint("features")
+def _features(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(rrb.Horizontal(rrb.Tabs(*_camera_views(cameras), name="photos"),
+                                  rrb.TimeSeriesView(origin="stats", name="keypoints per image"),
+                                  column_shares=[3, 1]),  # fmt: skip
+                   rrb.TimePanel(timeline="image"))
+
+
+@_blueprint("matches")
+def _matches(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(rrb.Vertical(rrb.TimeSeriesView(origin="stats", name="inliers per pair"),
+                                rrb.TextDocumentView(origin="tables/pairs", name="pairs")),
+                   rrb.TimePanel(timeline="pair"))
+
+
+@_blueprint("intrinsics")
+def _intrinsics(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(rrb.TextDocumentView(origin="tables/intrinsics", name="focal priors"))
+
+
+@_blueprint("mapping")
+def _mapping(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(
+        rrb.Horizontal(
+            rrb.Spatial3DView(origin="world", name="sparse model"),
+            rrb.Vertical(
+                rrb.TimeSeriesView(origin="stats/registered_images", name="registered images"),
+                rrb.BarChartView(origin="stats/reprojection_error_px",
+                                 name="reprojection error per image (px)"),
+                rrb.TextDocumentView(origin="tables/images", name="images")),
+            column_shares=[2, 1]),
+        rrb.TimePanel(timeline="registration"))  # fmt: skip
+
+
+@_blueprint("dense")
+def _dense(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(rrb.Spatial3DView(origin="world", name="dense cloud"))
+
+
+@_blueprint("mesh")
+def _mesh(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(rrb.Spatial3DView(origin="world", name="mesh"))
+
+
+@_blueprint("compare")
+def _compare(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(
+        rrb.Horizontal(
+            rrb.TextDocumentView(origin="tables/methods", name="focal by method"),
+            rrb.Vertical(rrb.TimeSeriesView(origin="kruppa", name="Kruppa focal per pair (px)"),
+                         rrb.TextDocumentView(origin="tables/pairs", name="Kruppa pairs"))),
+        rrb.TimePanel(timeline="pair"))  # fmt: skip
+
+
+def _frame_panel() -> rrb.TimePanel:
+    return rrb.TimePanel(timeline=FRAME_TIMELINE)
+
+
+@_blueprint("synth")
+def _synth(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(rrb.Horizontal(rrb.Spatial3DView(origin="world", name="truth and cameras"),
+                                  rrb.Grid(*_camera_views(cameras), name="silhouettes")),
+                   _frame_panel())  # fmt: skip
+
+
+@_blueprint("silhouettes")
+def _silhouettes(cameras: Sequence[str]) -> rrb.Blueprint:
+    backgrounds = [rrb.Spatial2DView(origin=f"backgrounds/{camera.rsplit('/', 1)[-1]}",
+                                     name=f"{camera.rsplit('/', 1)[-1]} background")
+                   for camera in cameras[:MAX_CAMERA_VIEWS]]  # fmt: skip
+    return _layout(
+        rrb.Vertical(
+            rrb.Grid(*_camera_views(cameras), name="frames and silhouettes"),
+            rrb.Horizontal(
+                rrb.TimeSeriesView(origin="silhouettes", name="foreground fraction"),
+                rrb.Tabs(rrb.TextDocumentView(origin="silhouettes/summary", name="summary"),
+                         rrb.Grid(*backgrounds, name="backgrounds"),
+                         rrb.Spatial3DView(origin="world", name="cameras"))),
+            row_shares=[2, 1]),
+        _frame_panel())  # fmt: skip
+
+
+@_blueprint("track")
+def _track(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(
+        rrb.Horizontal(
+            rrb.Vertical(
+                rrb.Spatial3DView(origin="world", name="body over the cameras"),
+                rrb.Horizontal(rrb.TimeSeriesView(origin="track/energy_px", name="energy (px)"),
+                               rrb.TimeSeriesView(origin="track/xor_fraction",
+                                                  name="XOR fraction of the silhouette")),
+                row_shares=[3, 1]),
+            rrb.Grid(*_camera_views(cameras), name="XOR per camera"),
+            column_shares=[3, 2]),
+        _frame_panel())  # fmt: skip
+
+
+@_blueprint("report")
+def _report(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(
+        rrb.Horizontal(
+            rrb.Spatial3DView(origin="world", name="skeleton and centre of mass"),
+            rrb.Tabs(rrb.TimeSeriesView(origin="report/joint_angles", name="joint angles (deg)"),
+                     rrb.TimeSeriesView(origin="report/joint_moments",
+                                        name="joint moments (N m)"),
+                     rrb.TimeSeriesView(origin="report/center_of_mass",
+                                        name="centre of mass (m, m/s)"))),
+        _frame_panel())  # fmt: skip
+
+
+@_blueprint("fit")
+def _fit(cameras: Sequence[str]) -> rrb.Blueprint:
+    return _layout(rrb.Horizontal(rrb.Spatial3DView(origin="world", name="body in the cloud"),
+                                  rrb.TextDocumentView(origin="fit", name="body fit"),
+                                  column_shares=[3, 1]))  # fmt: skip
+
+
+LOOPBACK = "127.0.0.1"
+
+
+def viewer_command(recordings: Sequence[Path], bind: str = LOOPBACK) -> list[str]:
+    """The command that opens recordings in the Rerun viewer (shipped in the rerun-sdk wheel),
+    its server listening on ``bind`` only: rerun 0.41 binds 0.0.0.0 (every interface) unless
+    told otherwise, which serves the recordings to the whole network."""
+    import ipaddress
     import shutil
     import sys
 
+    from recon.errors import UserError
+
+    try:
+        address = str(ipaddress.ip_address(bind))
+    except ValueError:
+        raise UserError(f"--bind {bind}: not an IP address (e.g. 127.0.0.1, 0.0.0.0, ::)"
+                        ) from None
     exe = shutil.which("rerun") or str(Path(sys.executable).with_name("rerun"))
-    return [exe, *map(str, recordings)]
+    return [exe, "--bind", address, *map(str, recordings)]
 
 
 def has_display() -> bool:
@@ -559,11 +783,11 @@ def has_display() -> bool:
     )
 
 
-def open_viewer(recordings: Sequence[Path]) -> list[str] | None:
+def open_viewer(recordings: Sequence[Path], bind: str = LOOPBACK) -> list[str] | None:
     """Start the viewer in the background when there is a display; else return its command."""
     import subprocess
 
-    command = viewer_command(recordings)
+    command = viewer_command(recordings, bind)
     if not has_display():
         return command
     subprocess.Popen(command, start_new_session=True)

@@ -8,7 +8,9 @@ import re
 import subprocess
 import sys
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -109,6 +111,79 @@ def recording_entities(path: Path) -> set[str]:
         [rerun, "rrd", "print", "-v", path], capture_output=True, text=True, check=True
     ).stdout
     return set(re.findall(r"(/[\w/-]*@\w+:\w+)", out))
+
+
+@dataclass(frozen=True)
+class ReadRecording:
+    """A saved .rrd read back with Rerun's own reader (`rerun.chunk.RrdReader`, rerun-sdk
+    0.41): its recording store's chunks and its blueprint store's views and time panel."""
+
+    application_id: str
+    chunks: list[Any]
+    """`rerun.chunk.Chunk` of the recording, in file order."""
+    views: list[dict[str, str]]
+    """The blueprint's views: ``kind`` (``3D``, ``2D``, ``TimeSeries``...), ``origin``, ``name``."""
+    timeline: str | None
+    """The timeline the blueprint's time panel shows (None: not set)."""
+
+    def rows(self, entity: str, column: str, *, static: bool | None = None) -> list[Any]:
+        """Every row of ``column`` (``Archetype:component``, or a timeline) logged at
+        ``entity`` (``world/...``), in file order; only static or temporal ones when asked."""
+        path = "/" + entity.strip("/")
+        rows: list[Any] = []
+        for chunk in self.chunks:
+            if chunk.entity_path != path or (static is not None and chunk.is_static != static):
+                continue
+            batch = chunk.to_record_batch()
+            if column in batch.schema.names:
+                rows.extend(batch.column(column).to_pylist())
+        return rows
+
+    def entities(self, column: str) -> set[str]:
+        """Entities (``/world/...``) with rows of ``column``."""
+        return {chunk.entity_path for chunk in self.chunks
+                if column in chunk.to_record_batch().schema.names}  # fmt: skip
+
+    def layout_problems(self) -> list[str]:
+        """Why the recording would not open right: no blueprint, a view of an entity without
+        data, data over time that is not on the timeline the time panel shows."""
+        if not self.views:
+            return ["no blueprint"]
+        problems = []
+        logged = {chunk.entity_path for chunk in self.chunks if not chunk.is_empty}
+        for view in self.views:
+            origin = "/" + view["origin"].strip("/")
+            if not any(e == origin or e.startswith(origin.rstrip("/") + "/") for e in logged):
+                problems.append(f"view {view['name']!r} shows {origin}, which holds no data")
+        for chunk in self.chunks:
+            if not chunk.is_static and self.timeline not in chunk.timeline_names:
+                problems.append(f"{chunk.entity_path} is on {chunk.timeline_names}, not on "
+                                f"the time panel's timeline {self.timeline}")
+        return sorted(set(problems))
+
+
+def read_recording(path: Path) -> ReadRecording:
+    """``path`` read back with Rerun's own reader; fails the test when it holds no recording."""
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(path)
+    (recording,) = reader.recordings()
+    views: dict[str, dict[str, str]] = {}
+    timeline = None
+    for store in reader.blueprints():
+        for chunk in reader.stream(store=store):
+            batch = chunk.to_record_batch()
+            columns = {name: batch.column(name).to_pylist()[-1] for name in batch.schema.names
+                       if ":" in name}  # fmt: skip
+            if "ViewBlueprint:class_identifier" in columns:
+                views[chunk.entity_path] = {
+                    "kind": columns["ViewBlueprint:class_identifier"][0],
+                    "origin": columns["ViewBlueprint:space_origin"][0],
+                    "name": (columns.get("ViewBlueprint:display_name") or [""])[0]}
+            if columns.get("TimePanelBlueprint:timeline"):
+                timeline = columns["TimePanelBlueprint:timeline"][0]
+    return ReadRecording(recording.application_id, list(reader.stream(store=recording)),
+                         list(views.values()), timeline)
 
 
 def mount_small_disk(folder: Path, size_bytes: int) -> Path:

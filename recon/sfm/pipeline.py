@@ -753,7 +753,8 @@ def _log_model(rec: Any, ws: Workspace, model: pycolmap.Reconstruction) -> None:
         )
     errors = per_image_reprojection_error(model)
     names = sorted(errors)
-    recording.log_series(rec, "image", "stats/reprojection_error_px", [errors[n] for n in names])
+    # Bars, not a curve: the mapping recording's timeline is `registration` (its blueprint's).
+    recording.log_bars(rec, "stats/reprojection_error_px", [errors[n] for n in names])
     recording.log_table(
         rec,
         "tables/images",

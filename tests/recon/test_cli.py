@@ -116,6 +116,13 @@ def test_view_without_display_prints_the_command(tmp_path):
     result = run_cli("view", tmp_path / "ws")
     assert result.returncode == 0
     assert "rerun" in result.stdout and "sfm.rrd" in result.stdout
+    # The viewer's server on this machine only, unless asked (issue 21: rerun binds 0.0.0.0).
+    commands = [line for line in result.stdout.splitlines() if "sfm.rrd" in line]
+    assert len(commands) == 2 and all("--bind 127.0.0.1 " in line for line in commands)
+    result = run_cli("view", tmp_path / "ws", "--bind", "0.0.0.0")
+    assert result.returncode == 0 and "--bind 0.0.0.0 " in result.stdout
+    _assert_one_line_error(run_cli("view", tmp_path / "ws", "--bind", "localhost:80"),
+                           "--bind localhost:80: not an IP address")
 
 
 def test_dense_and_mesh_need_their_inputs(tmp_path):

@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from tests.helpers import recording_entities, run_cli
+from tests.helpers import read_recording, recording_entities, run_cli
 
 
 @pytest.mark.slow  # 30-45 s; `make demo` / `make test-all` run it (make test's 10-minute budget)
@@ -36,6 +36,8 @@ def test_demo_recovers_the_known_cameras_and_surfaces(tmp_path):
     assert (out / "mesh" / "preview.png").exists()
     assert "/world/mesh@Mesh3D:vertex_positions" in recording_entities(out / "logs" / "mesh.rrd")
     assert "/world/dense@Points3D:positions" in recording_entities(out / "logs" / "dense.rrd")
+    for step in ("features", "matches", "intrinsics", "mapping", "dense", "mesh"):
+        assert read_recording(out / "logs" / f"{step}.rrd").layout_problems() == [], step
 
     # Idempotent: a second run renders nothing new and reuses every step.
     steps = json.loads((out / "run.json").read_text())["steps"]

@@ -171,3 +171,22 @@ def test_the_command_resumes_the_same_capture(synthetic: Synthetic, captured: Ca
     from plugins.protocols import Command
 
     assert isinstance(CaptureCommand(), Command)
+
+
+def test_the_capture_recordings_open_on_the_frame_timeline(captured: Captured):
+    """Issue 21: each recording of a capture, read back with Rerun's reader, carries its own
+    blueprint on the `frame` timeline, every view showing data that is on that timeline."""
+    from tests.helpers import read_recording
+
+    cameras = sorted(p.name for p in (captured.ws / "silhouettes").iterdir() if p.is_dir())
+    assert len(cameras) == 4
+    for step in ("silhouettes", "track", "report"):
+        read = read_recording(captured.ws / "logs" / f"{step}.rrd")
+        assert read.application_id == f"mocap-{step}"
+        assert read.timeline == "frame" and read.layout_problems() == [], step
+    views = {(v["kind"], v["origin"])
+             for v in read_recording(captured.ws / "logs" / "report.rrd").views}
+    assert {("3D", "world"), ("TimeSeries", "report/joint_angles")} <= views
+    views = {(v["kind"], v["origin"])
+             for v in read_recording(captured.ws / "logs" / "track.rrd").views}
+    assert {("2D", f"world/cameras/{c}/image") for c in cameras} <= views

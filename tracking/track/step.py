@@ -351,6 +351,7 @@ class _Recorder:
         self.rec = self._context.__enter__()
         recording.log_y_up_world(self.rec)
         recording.log_skeleton_context(self.rec, "world/body/skeleton", NODE_NAMES, BONES)
+        recording.log_xor_context(self.rec, "world/cameras")
         for cam in self.cameras:
             recording.log_camera_image(self.rec, image_name=cam.name, image_path=None, K=cam.K,
                                        width=cam.width, height=cam.height,

@@ -10,7 +10,7 @@ from recon.calibration.compare import CompareConfig, compare_intrinsics
 from recon.demo import DemoConfig, make_scene
 from recon.sfm.pipeline import SfMConfig, run_sfm
 from recon.workspace import Workspace
-from tests.helpers import recording_entities, run_cli, shared_dataset
+from tests.helpers import read_recording, recording_entities, run_cli, shared_dataset
 
 TRUE_FOCAL = 600.0  # the synthetic scene's
 
@@ -59,6 +59,9 @@ def test_compare_on_the_synthetic_scene(demo_ws):
     entities = recording_entities(ws.root / "logs" / "compare.rrd")
     assert "/kruppa/pair_focal_px@Scalars:scalars" in entities
     assert "/tables/methods@TextDocument:text" in entities
+    # Opens on the `pair` timeline of its curves, every view with data (issue 21).
+    read = read_recording(ws.root / "logs" / "compare.rrd")
+    assert read.timeline == "pair" and read.layout_problems() == []
 
 
 def test_kruppa_through_sfm_sets_the_prior(demo_ws):

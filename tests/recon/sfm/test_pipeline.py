@@ -9,7 +9,7 @@ import pytest
 from recon.evaluation.truth import pose_errors
 from recon.sfm.pipeline import SfMConfig, cams_from_world, initialise_intrinsics, map_sparse
 from recon.workspace import Workspace
-from tests.helpers import recording_entities, run_cli, shared_dataset
+from tests.helpers import read_recording, recording_entities, run_cli, shared_dataset
 
 TRUE_FOCAL = 1280.0
 
@@ -105,8 +105,32 @@ def test_mapping_recording_has_cameras_points_and_errors(tmp_path):
     assert f"/world/cameras/{name}@Transform3D:mat3x3" in entities
     assert f"/world/cameras/{name}/image@Pinhole:image_from_camera" in entities
     assert f"/world/cameras/{name}/image/keypoints@Points2D:positions" in entities
-    assert "/stats/reprojection_error_px@Scalars:scalars" in entities
+    assert "/stats/reprojection_error_px@BarChart:values" in entities
     assert "/stats/registered_images@Scalars:scalars" in entities
+
+
+def test_mapping_recording_opens_on_the_timeline_of_its_curve(tmp_path):
+    """Issue 21: `stats/registered_images` sat on a timeline the viewer did not show, so its
+    plot was empty until the user switched timelines. Read back with Rerun's reader: the
+    blueprint's time panel shows `registration`, which carries the curve (one point per
+    registration), and every view of the layout shows data."""
+    ws, truth = _synthetic_workspace(tmp_path)
+    _run_single_threaded(ws)
+    rec = read_recording(ws.log_path("mapping"))
+    assert rec.application_id == "mocap-mapping"
+    assert rec.timeline == "registration"
+    registrations = rec.rows("stats/registered_images", "registration")
+    counts = rec.rows("stats/registered_images", "Scalars:scalars")
+    assert len(counts) >= 2 and registrations == list(range(len(counts)))
+    assert [c for (c,) in counts] == list(range(1, len(counts) + 1))  # one more each time
+    assert {(v["kind"], v["origin"]) for v in rec.views} >= {
+        ("3D", "world"), ("TimeSeries", "stats/registered_images"),
+        ("BarChart", "stats/reprojection_error_px")}
+    assert rec.layout_problems() == []
+    # The reprojection error per image: a bar per registered image, whichever the timeline.
+    ((bars,),) = rec.rows("stats/reprojection_error_px", "BarChart:values", static=True)
+    assert bars["shape"] == [len(truth.images)] and max(bars["buffer"]) < 1.0  # px
+    assert read_recording(ws.log_path("intrinsics")).layout_problems() == []
 
 
 @pytest.mark.shared_data
@@ -124,3 +148,5 @@ def test_temple_through_the_cli(tmp_path):
     assert again.returncode == 0 and again.stdout.count("(reused)") == 4
     entities = recording_entities(ws / "logs" / "features.rrd")
     assert "/world/cameras/templeSR0001_png/image@EncodedImage:blob" in entities
+    for step in ("features", "matches", "intrinsics", "mapping"):
+        assert read_recording(ws / "logs" / f"{step}.rrd").layout_problems() == [], step

@@ -16,7 +16,7 @@ import pytest
 from plugins.registry import create
 from recon.cameras import Camera
 from recon.errors import UserError
-from tests.helpers import recording_entities, run_cli, shared_dataset
+from tests.helpers import read_recording, recording_entities, run_cli, shared_dataset
 from tracking.body.bvh import write_bvh
 from tracking.body.model import NODE_NAMES, BodyModel, BodyShape, Pose, node_positions_in_world
 from tracking.body.motion import motion_from_poses
@@ -203,6 +203,8 @@ def test_cameras_ring_reads_back(walk_noisy):
     assert "/world/cameras/cam00@Transform3D:mat3x3" in entities
     assert "/world/cameras/cam03/image@SegmentationImage:buffer" in entities
     assert "/world/gt/joints@Points3D:positions" in entities
+    read = read_recording(walk_noisy / "logs" / "synth.rrd")
+    assert read.timeline == "frame" and read.layout_problems() == []
 
 
 # ---------------------------------------------------------------------------------------------

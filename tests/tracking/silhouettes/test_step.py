@@ -14,7 +14,7 @@ import pytest
 from recon.cameras import Camera
 from recon.errors import UserError
 from recon.workspace import Workspace
-from tests.helpers import recording_entities, run_cli, shared_dataset
+from tests.helpers import read_recording, recording_entities, run_cli, shared_dataset
 from tests.tracking.rig.test_video import (
     FRAMES,
     HEIGHT,
@@ -320,6 +320,11 @@ def test_the_cli_reports_frames_without_subject_and_records_them(tmp_path: Path)
                    "/world/cameras/cam01/image/silhouette@SegmentationImage",
                    "/silhouettes/cam01/foreground_fraction@Scalars"):
         assert any(e.startswith(needed) for e in entities), (needed, sorted(entities))
+    # Opens on the `frame` timeline, a view per camera of its frames and masks (issue 21).
+    read = read_recording(ws / "logs" / "silhouettes.rrd")
+    assert read.timeline == "frame" and read.layout_problems() == []
+    assert {("2D", f"world/cameras/{c}/image") for c in ("cam00", "cam01")} <= {
+        (v["kind"], v["origin"]) for v in read.views}
     assert not list((ws / "logs").glob("*partial*"))
     # An empty-silhouette-in-every-frame workspace gets its own clear warning.
     result = run_cli("silhouettes", ws, "--first", "0", "--last", "1", "--no-multi-view-check")
