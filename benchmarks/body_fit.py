@@ -47,7 +47,7 @@ from tracking.fit.body_fit import (
     N_POSE_PARAMS,
     FitConfig,
     _bounds,
-    _initial_xs,
+    _initial_x,
     _orientation_candidates,
     _Problem,
     _surface,
@@ -69,7 +69,7 @@ def _no_search(points: np.ndarray) -> dict:
     points = points[rng.choice(len(points), min(1500, len(points)), replace=False)]
     rotations, extent = _orientation_candidates(points, 8)
     problem = _Problem(_surface(), _bounds(extent), FitConfig().robust_scale * extent)
-    x = problem.icp(_initial_xs(rotations[0], points, extent)[0], points,
+    x = problem.icp(_initial_x(rotations[0], points, extent), points,
                     np.arange(N_POSE_PARAMS + 2), rounds=15, steps=3)  # fmt: skip
     pose = Pose(x[:N_POSE_PARAMS]).clamped()
     return node_positions_in_world(pose, shape_from_scales(x[_H], 1.0))
