@@ -210,6 +210,23 @@ def test_mpfb_fit_of_real_clip_poses_is_right_or_refused(clip, frame, seed):
     assert not result.success or errors.max() < 0.050, (result.message, errors.max())
 
 
+@pytest.mark.slow
+@pytest.mark.shared_data
+def test_a_refused_fit_reports_its_lowest_cost_guess():
+    """Arms overhead, frame 239 (the forearm turned 47 degrees and bent 38): every orientation
+    is refused, for the right forearm. The failed result reported was the superquadrics'
+    lowest-cost fit, upside down (every joint 100-450 mm off, mean 268 mm), until it became
+    the judged fit of the lowest cost on the skinned body (session 19): upright, right but
+    for that wrist (mean 12-21 mm)."""
+    pose = _real_pose("cmu_arms_overhead.bvh", 239)
+    points, _ = body_cloud(MISMATCHED, pose, np.random.default_rng(1000))
+    result = fit_body(points, FitConfig(body="mpfb"))
+    fitted = np.array([result.joints[n] for n in NODE_NAMES])
+    errors = np.linalg.norm(fitted - MISMATCHED.joints(pose), axis=1)
+    assert not result.success or errors.max() < 0.050, (result.message, errors.max())
+    assert errors.mean() < 0.030 and np.median(errors) < 0.015, errors  # right or refused
+
+
 def test_a_limb_fitted_elsewhere_is_found_again_by_the_repair():
     """`repair_limbs`, the second chance of a fit refused for a limb: from MakeHuman's average
     subject (not the cloud's) with the left arm held out sideways, every candidate of that
