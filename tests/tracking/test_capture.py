@@ -9,10 +9,13 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
+import numpy as np
 import pytest
 
 from recon.cameras import write_cameras_json
 from recon.errors import UserError
+from recon.workspace import Workspace
 from tracking.body.bvh import write_bvh
 from tracking.body.model import BodyShape
 from tracking.body.motion import motion_from_poses, read_pose_file
@@ -190,3 +193,25 @@ def test_the_capture_recordings_open_on_the_frame_timeline(captured: Captured):
     views = {(v["kind"], v["origin"])
              for v in read_recording(captured.ws / "logs" / "track.rrd").views}
     assert {("2D", f"world/cameras/{c}/image") for c in cameras} <= views
+
+
+def test_each_cameras_track_view_shows_its_video_frames_under_the_overlay(captured: Captured):
+    """Issue 21's track view: per camera, the image, its silhouette and the XOR overlay. The
+    video frames (`TrackStepConfig.logged_images`, 10 spread over the frames) are logged at the
+    camera's image entity, under its overlay, each the camera's own frame."""
+    from tests.helpers import read_recording
+    from tracking.rig.video import read_frames
+
+    read = read_recording(captured.ws / "logs" / "track.rrd")
+    tracked = read.rows("track/energy_px", "frame")
+    for camera in sorted(p.name for p in (captured.ws / "silhouettes").iterdir() if p.is_dir()):
+        entity = f"world/cameras/{camera}/image"
+        frames = read.rows(entity, "frame", static=False)
+        assert len(frames) == min(10, len(tracked)) and set(frames) <= set(tracked)
+        assert frames[0] == tracked[0] and frames[-1] == tracked[-1]
+        blobs = read.rows(entity, "EncodedImage:blob", static=False)
+        videos = dict(read_frames(Workspace(captured.ws), camera, frames))
+        for frame, (blob,) in zip(frames, blobs, strict=True):
+            image = cv2.imdecode(np.asarray(blob, np.uint8), cv2.IMREAD_COLOR)
+            assert image.shape == videos[frame].shape  # 320x240: logged at full size
+            assert np.abs(image.astype(float) - videos[frame]).mean() < 4.0  # JPEG

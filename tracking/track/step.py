@@ -17,8 +17,9 @@ or `mocap silhouettes`) and writes, each atomically:
   (`tracking.body.gltf`; lost frames held as in the BVH);
 * ``tracks/meshes/<frame:06d>.ply`` with ``--meshes``: that mesh posed in each tracked frame,
   world frame, metres;
-* ``logs/track.rrd``: silhouettes and the XOR overlay per camera, the body mesh and skeleton,
-  and the energy per frame, on the ``frame`` and ``time`` timelines.
+* ``logs/track.rrd``: silhouettes and the XOR overlay per camera over the video frame
+  (`TrackStepConfig.logged_images` of them), the body mesh and skeleton, and the energy per
+  frame, on the ``frame`` and ``time`` timelines.
 
 The poses, the BVH and the recording are in the *upright frame* of the camera rig
 (`tracking.rig.cameras.upright_frame`): Y up, as the body model, BVH and OpenSim expect, and the
@@ -29,6 +30,7 @@ pitch near 0, far from the gimbal lock of the root's ZXY angles, which a Z-up wo
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import io
@@ -45,6 +47,7 @@ from recon.progress import bar as progress_bar
 from recon.workspace import Timer, Workspace, atomic_output, fingerprint, write_json_atomic
 from tracking.body.model import BONES, NODE_NAMES, Pose, TrackedModel, pose_in_frame
 from tracking.body.motion import read_pose_file
+from tracking.rig.video import read_frames
 from tracking.silhouettes.step import UNKNOWN_NAME
 from tracking.track.render import render_views
 from tracking.track.tracker import FrameResult, SilhouetteTracker, TrackConfig, TrackingLost
@@ -66,6 +69,16 @@ class TrackStepConfig:
         metadata={"help": "also write tracks/meshes/<frame:06d>.ply: the subject's full mesh "
                   "in each tracked frame (world frame, metres, with normals)"},
     )  # fmt: skip
+    logged_images: int = field(
+        default=10,
+        metadata={"help": "video frames per camera logged under the XOR overlays of "
+                  "logs/track.rrd, spread over the tracked frames (0: none; a workspace "
+                  "without videos has none)"},
+    )  # fmt: skip
+
+    def __post_init__(self) -> None:
+        if self.logged_images < 0:
+            raise UserError(f"--logged-images must be >= 0, got {self.logged_images}")
 
 
 def frame_rate_of(ws: Workspace) -> float:
@@ -160,7 +173,9 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
                                 unknown=unknown_pixels(ws, cameras))
     results: list[FrameResult] = []
 
-    with Timer() as timer, _Recorder(ws, upright, frame_rate) as recorder:
+    logged = {frames[i] for i in np.unique(np.linspace(
+        0, len(frames) - 1, min(step.logged_images, len(frames))).round().astype(int))}
+    with Timer() as timer, _Recorder(ws, upright, frame_rate, logged) as recorder:
         if init_model is None and config.shape_frames > 1:
             shape_frames = frames[:config.shape_frames]
             bar = progress_bar(len(shape_frames), "shape", "frame", enabled=progress)
@@ -340,8 +355,10 @@ def write_subject_glb(path: Path, model: TrackedModel, poses: Sequence[Pose],
 class _Recorder:
     """logs/track.rrd, written as the frames are tracked."""
 
-    def __init__(self, ws: Workspace, cameras: list[Any], frame_rate: float) -> None:
+    def __init__(self, ws: Workspace, cameras: list[Any], frame_rate: float,
+                 logged: set[int] = frozenset()) -> None:  # fmt: skip
         self.ws, self.cameras, self.frame_rate = ws, cameras, frame_rate
+        self.logged = logged  # frames whose video images are logged under the overlays
 
     def __enter__(self) -> _Recorder:
         from recon import recording
@@ -356,10 +373,26 @@ class _Recorder:
             recording.log_camera_image(self.rec, image_name=cam.name, image_path=None, K=cam.K,
                                        width=cam.width, height=cam.height,
                                        cam_from_world=cam.cam_from_world)  # fmt: skip
+        # The video frames of `logged`, read once in frame order (`frame` is called so).
+        self._videos = {}
+        if self.logged and self.ws.videos_dir.is_dir():
+            for cam in self.cameras:
+                with contextlib.suppress(UserError):  # a camera without its video: no images
+                    self._videos[cam.name] = read_frames(self.ws, cam.name, sorted(self.logged))
         return self
 
     def frame(self, tracker: SilhouetteTracker, result: FrameResult, masks: list) -> None:
         r, t = self.recording, result.frame / self.frame_rate
+        if result.frame in self.logged:
+            for name, video in list(self._videos.items()):
+                try:
+                    index, image = next(video, (None, None))
+                except UserError:  # the video ends early, or a frame does not decode
+                    del self._videos[name]
+                    continue
+                if index == result.frame:
+                    r.log_frame_image(self.rec, f"world/cameras/{r.entity_name(name)}/image",
+                                      image, result.frame, t)  # fmt: skip
         if result.pose is None or tracker.model is None:
             if np.isfinite(result.energy):
                 r.log_frame_scalar(self.rec, "track/xor_fraction", result.xor_fraction,

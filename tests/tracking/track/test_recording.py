@@ -130,3 +130,4 @@ def test_the_blueprint_shows_body_cameras_and_energy_on_the_frame_timeline(track
     # What the views show is on the frame timeline, one row per tracked frame.
     assert rec.rows("track/energy_px", "frame") == list(range(FRAMES))
     assert rec.rows("world/body/mesh", "frame") == list(range(FRAMES))
+
