@@ -102,21 +102,9 @@ _TRUNK_NODES = [NODE_NAMES.index(n) for n in ("pelvis", "spine", "neck")]
 # Candidate limb configurations, degrees, in each limb's parameter order (rz, rx, ry, hinge);
 # rz is the left-side abduction, mirrored for the right. A grid over the ball joint's two swing
 # angles, with the hinge straight and bent.
-# The grid's twist is 0, and its flexion stops at -90 (forward): arms raised sideways with the
-# forearm turned (abduction 90-135 degrees, twist +-60), and arms raised forward overhead
-# (flexion -135 to -180), are starts of their own. Without them, three CMU frames of arms
-# overhead and a cartwheel (true arms: abduction 104-131 with twist 68-90, or flexion -159 to
-# -170) were refused with every joint 100-540 mm off; with them, they fit to 2-3 mm.
 _ARM_CANDIDATES = tuple(
     (abd, flex, 0, elbow) for abd in (0, 45, 90, 135) for flex in (0, -45, -90)
     for elbow in (0, 90)
-) + tuple(
-    (abd, flex, twist, elbow) for abd in (90, 135) for flex in (0, -45) for twist in (-60, 60)
-    for elbow in (45, 100)
-) + tuple(
-    (abd, flex, twist, 30) for abd in (0, 45) for flex in (-135, -180) for twist in (-60, 0, 60)
-) + tuple(
-    (abd, flex, 0, 0) for abd in (0, 45) for flex in (-135, -180)
 )  # fmt: skip
 _LEG_CANDIDATES = tuple(
     (abd, flex, 0, knee) for abd in (0, 30) for flex in (15, -30, -60, -90) for knee in (0, 70)

@@ -130,13 +130,6 @@ def _real_pose(clip: str, frame: int) -> Pose:
     # starts and rounds (`search_limbs` with ``dense``; session 18): 6 and 5 mm.
     ("cmu_131_01_start_walk_stop.bvh", 198, 1008),
     ("cmu_131_01_start_walk_stop.bvh", 397, 1009),
-    # Arms raised sideways with the forearms turned (abduction 104-119, twist 66-73 degrees):
-    # refused, 108 and 366 mm off, before the arm starts with a twist (session 19): 2-3 mm.
-    ("cmu_arms_overhead.bvh", 958, 1003),
-    ("cmu_arms_overhead.bvh", 1198, 1004),
-    # A cartwheel, head down with the arms overhead (flexion -159 and -170): refused, 538 mm
-    # off, before the arm starts raised overhead (session 19): 3 mm.
-    ("cmu_cartwheel.bvh", 115, 1016),
 ])  # fmt: skip
 def test_mpfb_fit_of_real_clip_poses_once_fitted_wrong(clip, frame, seed):
     pose = _real_pose(clip, frame)
