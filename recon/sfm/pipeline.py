@@ -21,6 +21,7 @@ import contextlib
 import enum
 import importlib
 import shutil
+import time
 from collections import defaultdict
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -36,6 +37,12 @@ from plugins.protocols import CameraInfo, IntrinsicsContext, IntrinsicsResult
 from recon.errors import UserError
 from recon.progress import bar, count_rows, polled
 from recon.sfm.images import camera_key
+from recon.sfm.retry import (
+    RetryResult,
+    robust_extraction_options,
+    robust_matching_options,
+    unregistered_reasons,
+)
 from recon.workspace import StepRecord, Timer, Workspace, atomic_output, fingerprint
 
 
@@ -55,6 +62,11 @@ class Matcher(enum.StrEnum):
 class FrontEnd(enum.StrEnum):
     SIFT = "colmap-sift"
     HARRIS_NCC = "harris-ncc"
+
+
+class Features(enum.StrEnum):
+    DEFAULT = "default"
+    ROBUST = "robust"
 
 
 # Exhaustive matching is quadratic; beyond this many images `auto` switches to sequential.
@@ -101,6 +113,14 @@ class SfMConfig:
         metadata={"help": "downscale images to this many pixels on the long side for features"},
     )
     max_num_features: int = field(default=8192, metadata={"help": "SIFT features per image"})
+    features: Features = field(
+        default=Features.DEFAULT,
+        metadata={
+            "help": "default: COLMAP's SIFT and matching; robust: affine-covariant, "
+            "domain-size-pooled SIFT and guided matching from the start (slower, and less "
+            "precise keypoints: on the temple ring the focal came out 2-3% long)"
+        },
+    )
     matcher: Matcher = field(
         default=Matcher.AUTO,
         metadata={
@@ -114,6 +134,19 @@ class SfMConfig:
     refine_focal: bool | None = field(
         default=None,
         metadata={"help": "refine focal in BA (default: as the initialiser says)"},
+    )
+    retry_unregistered: bool = field(
+        default=True,
+        metadata={
+            "help": "when the first mapping leaves images out, re-extract them and their "
+            "neighbours with robust features and register them into the model, its "
+            "intrinsics held (recon.sfm.retry); never runs when every image registers"
+        },
+    )
+    retry_neighbours: int = field(
+        default=4,
+        metadata={"help": "retry: registered images re-extracted with each unregistered one "
+                          "(those it shares the most matches with)"},
     )
     num_threads: int = field(default=-1, metadata={"help": "threads (-1: all cores)"})
     seed: int = field(default=0, metadata={"help": "random seed, for repeatable runs"})
@@ -133,6 +166,11 @@ class SfMConfig:
         if self.sequential_overlap < 1:
             raise UserError(f"--sequential-overlap {self.sequential_overlap}: give at least 1 "
                             "(each image is matched with that many following images)")
+        if self.retry_neighbours < 1:
+            raise UserError(f"--retry-neighbours {self.retry_neighbours}: give at least 1")
+        if self.features == Features.ROBUST and self.front_end == FrontEnd.HARRIS_NCC:
+            raise UserError("--features robust is SIFT's; it does not apply to "
+                            "--front-end harris-ncc")
 
 
 _CAMERA_MODELS = {
@@ -217,15 +255,17 @@ def extract_features(
         "camera_mode": str(mode),
         "images": names,
     }
+    if config.features == Features.ROBUST:
+        # Only when set, so that the default's fingerprint (and existing workspaces) stay.
+        settings["features"] = str(config.features)
     fp = fingerprint("features", settings)
     if done := ws.reusable("features", fp, ws.database_path, overwrite=overwrite):
         return done
 
     reader = pycolmap.ImageReaderOptions(camera_model=config.camera_model)
-    extraction = pycolmap.FeatureExtractionOptions()
-    extraction.max_image_size = config.max_image_size
-    extraction.num_threads = config.num_threads
-    extraction.sift.max_num_features = config.max_num_features
+    extraction = _extraction_options(config)
+    if config.features == Features.ROBUST:
+        robust_extraction_options(extraction)
     colmap_mode = {
         CameraMode.SINGLE: pycolmap.CameraMode.SINGLE,
         CameraMode.PER_IMAGE: pycolmap.CameraMode.PER_IMAGE,
@@ -266,6 +306,20 @@ def extract_features(
         seconds=timer.seconds,
         summary={"images": num_images, "cameras": num_cameras, "keypoints": num_keypoints},
     )
+
+
+def _extraction_options(config: SfMConfig) -> pycolmap.FeatureExtractionOptions:
+    extraction = pycolmap.FeatureExtractionOptions()
+    extraction.max_image_size = config.max_image_size
+    extraction.num_threads = config.num_threads
+    extraction.sift.max_num_features = config.max_num_features
+    return extraction
+
+
+def _matching_options(config: SfMConfig) -> pycolmap.FeatureMatchingOptions:
+    matching = pycolmap.FeatureMatchingOptions()
+    matching.num_threads = config.num_threads
+    return matching
 
 
 def _harris_config(config: SfMConfig) -> Any:
@@ -391,12 +445,16 @@ def match_features(
     if matcher is Matcher.AUTO:
         matcher = Matcher.EXHAUSTIVE if num_images <= EXHAUSTIVE_MAX_IMAGES else Matcher.SEQUENTIAL
     settings = {"matcher": str(matcher), "sequential_overlap": config.sequential_overlap}
+    robust = upstream.config.get("features") == Features.ROBUST
+    if robust:
+        settings["guided_matching"] = True
     fp = fingerprint("matches", settings, upstream.fingerprint)
     if done := ws.reusable("matches", fp, ws.database_path, overwrite=overwrite):
         return done
 
-    matching = pycolmap.FeatureMatchingOptions()
-    matching.num_threads = config.num_threads
+    matching = _matching_options(config)
+    if robust:
+        robust_matching_options(matching)
     with Timer() as timer, atomic_output(ws.database_path, seed_from=ws.database_path) as db:
         with pycolmap.Database.open(db) as database:
             # Stale matches from other settings would be kept by COLMAP, which skips known pairs.
@@ -561,7 +619,9 @@ def map_sparse(
     refine = config.refine_focal
     if refine is None:
         refine = upstream.summary["refine_focal"]
-    settings = {"refine_focal": refine, "seed": config.seed}
+    settings = {"refine_focal": refine, "seed": config.seed,
+                "retry_unregistered": config.retry_unregistered,
+                "retry_neighbours": config.retry_neighbours}
     fp = fingerprint("mapping", settings, upstream.fingerprint)
     if done := ws.reusable("mapping", fp, ws.model_dir, overwrite=overwrite):
         return done
@@ -592,6 +652,7 @@ def map_sparse(
             # Mapping keeps one core busy at most on small sets: write the queued recordings
             # (and import rerun) on the other one meanwhile.
             recordings.start()
+        retry_report: dict[str, Any] | None = None
         try:
             if num_images == 2:
                 # The thesis' two-photo case: E from the verified F and the focal, the pose
@@ -608,20 +669,86 @@ def map_sparse(
                         ws.database_path, ws.images_dir, raw, options=options,
                         next_image_callback=on_image,
                     )
+            if not models:
+                raise UserError(f"mapping registered no images in {ws.root}: "
+                                f"{_why_no_model(ws.database_path)}")
+            ordered = sorted(models.values(), key=lambda r: r.num_reg_images(), reverse=True)
+            if ordered[0].num_reg_images() < num_images and num_images > 2:
+                ordered[0], retry_report = _second_pass(
+                    ws, config, ordered[0], options, out / "retry", on_image)
         finally:
             progress.close()
-        if not models:
-            raise UserError(f"mapping registered no images in {ws.root}: "
-                            f"{_why_no_model(ws.database_path)}")
-        ordered = sorted(models.values(), key=lambda r: r.num_reg_images(), reverse=True)
         for index, model in enumerate(ordered):
             (out / str(index)).mkdir()
             model.write(out / str(index))
         shutil.rmtree(raw)
         summary = model_summary(ordered[0], num_images) | {"models": len(ordered)}
+        if retry_report is not None:
+            summary["retry"] = retry_report
         _log_mapping(ws, ordered[0], registrations)
     return ws.record_step("mapping", fp, outputs=[ws.model_dir], config=settings,
                           seconds=timer.seconds, summary=summary)
+
+
+def _second_pass(
+    ws: Workspace, config: SfMConfig, first: pycolmap.Reconstruction,
+    options: pycolmap.IncrementalPipelineOptions, work_dir: Path,
+    on_image: Callable[[], None],
+) -> tuple[pycolmap.Reconstruction, dict[str, Any]]:
+    """The images ``first`` lacks, with why, retried when the settings allow
+    (:func:`recon.sfm.retry.retry_unregistered`). Returns the model to keep and the report of
+    the mapping summary's ``retry`` entry; the retry's database is left in ``work_dir``
+    (``sparse/retry/database.db``) only when its model is kept."""
+    from recon.sfm.retry import retry_unregistered
+
+    reasons = unregistered_reasons(ws.database_path, first)
+    report: dict[str, Any] = {
+        "unregistered_first_pass": {name: r.as_dict() for name, r in reasons.items()},
+        "ran": False,
+    }
+    features = ws.step("features")
+    robust_already = features is not None and features.config.get("features") == Features.ROBUST
+    harris = features is not None and features.config.get("front_end") == FrontEnd.HARRIS_NCC
+    if not config.retry_unregistered or robust_already or harris:
+        report["skipped"] = ("--no-retry-unregistered" if not config.retry_unregistered
+                             else "the features are already robust" if robust_already
+                             else "the Harris + NCC front end has no robust variant")
+        report["failed"] = report["unregistered_first_pass"]
+        return first, report
+    started = time.perf_counter()
+    try:
+        with _colmap_errors_restated():
+            result: RetryResult = retry_unregistered(
+                ws.database_path, ws.images_dir, first, work_dir,
+                extraction=_extraction_options(config),
+                matching=_matching_options(config),
+                mapping=options,
+                neighbours=config.retry_neighbours,
+                device=_device(),
+                next_image_callback=on_image,
+            )
+    except (RuntimeError, ValueError) as error:
+        # The retry is a second chance: its failure must not cost the first model.
+        shutil.rmtree(work_dir, ignore_errors=True)
+        report.update(ran=True, error=str(error).strip().splitlines()[-1],
+                      failed=report["unregistered_first_pass"],
+                      seconds=round(time.perf_counter() - started, 3))
+        return first, report
+    if result.database_path != work_dir / "database.db":
+        shutil.rmtree(work_dir, ignore_errors=True)
+    report.update(
+        ran=True,
+        retried=list(result.retried),
+        neighbours=list(result.neighbours),
+        registered=list(result.registered),
+        failed={name: r.as_dict() for name, r in result.failed.items()},
+        database=(str(Path("sparse") / "retry" / "database.db")
+                  if work_dir.exists() else None),
+        first_pass_registered=first.num_reg_images(),
+        first_pass_mean_reprojection_error_px=first.compute_mean_reprojection_error(),
+        seconds=round(time.perf_counter() - started, 3),
+    )
+    return result.model, report
 
 
 def _why_no_model(database_path: Path) -> str:
@@ -781,6 +908,7 @@ class SfMSummary:
             f"workspace   {self.workspace}",
             f"registered  {m['registered']} of {m['images']} images"
             + (f" (largest of {m['models']} models)" if m["models"] > 1 else ""),
+            *retry_lines(m.get("retry")),
             f"points      {m['points']}  (mean track length {m['mean_track_length']:.2f})",
             f"reprojection error  {m['mean_reprojection_error_px']:.3f} px (mean)",
         ]
@@ -806,6 +934,33 @@ class SfMSummary:
             f"view        mocap view {self.workspace}",
         ]
         return out
+
+
+def _reason_text(reason: dict[str, Any]) -> str:
+    from recon.sfm.retry import Unregistered
+
+    return Unregistered(**reason).describe()
+
+
+def retry_lines(retry: dict[str, Any] | None) -> list[str]:
+    """The summary lines of the mapping step's ``retry`` entry: which images the first pass
+    left out and why, what the retry registered, and why the rest stayed out."""
+    if retry is None:
+        return []
+    first = retry["unregistered_first_pass"]
+    out = []
+    if retry.get("registered") is not None:
+        out.append(f"retry       {len(first)} left out by the first pass, re-matched with robust "
+                   f"features: {len(retry['registered'])} registered ({retry['seconds']:.1f} s)")
+        for name in retry["registered"]:
+            out.append(f"            {name}: {_reason_text(first[name])} at first")
+    elif "error" in retry:
+        out.append(f"retry       failed ({retry['error']}); the first model is kept")
+    elif "skipped" in retry:
+        out.append(f"retry       not run: {retry['skipped']}")
+    for name, reason in retry["failed"].items():
+        out.append(f"unregistered {name}: {_reason_text(reason)}")
+    return out
 
 
 STEPS = (
