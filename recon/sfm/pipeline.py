@@ -744,6 +744,8 @@ def _second_pass(
         failed={name: r.as_dict() for name, r in result.failed.items()},
         database=(str(Path("sparse") / "retry" / "database.db")
                   if work_dir.exists() else None),
+        intrinsics=result.intrinsics,
+        stage_seconds={k: round(v, 3) for k, v in result.seconds.items()},
         first_pass_registered=first.num_reg_images(),
         first_pass_mean_reprojection_error_px=first.compute_mean_reprojection_error(),
         seconds=round(time.perf_counter() - started, 3),
@@ -951,7 +953,9 @@ def retry_lines(retry: dict[str, Any] | None) -> list[str]:
     out = []
     if retry.get("registered") is not None:
         out.append(f"retry       {len(first)} left out by the first pass, re-matched with robust "
-                   f"features: {len(retry['registered'])} registered ({retry['seconds']:.1f} s)")
+                   f"features: {len(retry['registered'])} registered ({retry['seconds']:.1f} s)"
+                   + (", the intrinsics refined: held, they left images out"
+                      if retry.get("intrinsics") == "refined" else ""))
         for name in retry["registered"]:
             out.append(f"            {name}: {_reason_text(first[name])} at first")
     elif "error" in retry:

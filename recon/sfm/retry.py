@@ -20,19 +20,25 @@ Why the images failed is read from the first pass (:func:`unregistered_reasons`)
    COLMAP's incremental mapper from it, which registers what it can and ends with a global
    bundle adjustment of poses and points.
 
-The first model's cameras are held constant throughout. Measured on the temple sparse ring
-(benchmarks/sfm_registration.py): refining them after the three retried images joined moved the
-focal from 1525 px to 1574-1580 px (3.3-3.8% off the true 1523 px), its radial distortion from
--0.10 to -0.33..-0.40, so the ring's poses do not pin focal and distortion apart; held, the focal
-stays the first pass's (0.15% off) and all 16 images register. Re-mapping every image with
-robust features instead gave 1550-1563 px and twice the reprojection error (0.44 against 0.22
-px): affine-shape keypoints are located less precisely, which is why they are only added where
-the first-pass features failed.
+The first model's cameras are held constant throughout. Only when that leaves images out is a
+second attempt made with them refined (as the first pass refined them), kept if it registers
+more: a first model of a few images can have a focal so wrong that right poses are rejected
+(measured: five ring views and a photo of something else, first model 3 views at 1875 px).
+
+Measured on the temple sparse ring (benchmarks/sfm_registration.py): refining the cameras after
+the three retried images joined moved the focal from 1525 px to 1574-1580 px (3.3-3.8% off the
+true 1523 px) and its radial distortion from -0.10 to -0.33..-0.40 for a reprojection error
+0.5% lower: the ring's poses do not pin focal and distortion apart. Held, the focal stays the
+first pass's and all 16 images register. Re-mapping every image with robust features instead
+gave 1550-1574 px and twice the reprojection error (0.43 against 0.22 px): affine-shape
+keypoints are located less precisely, which is why they are only added where the first-pass
+features failed.
 """
 
 from __future__ import annotations
 
 import shutil
+import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -73,6 +79,10 @@ class RetryResult:
     neighbours: tuple[str, ...]  # registered images re-extracted with them
     registered: tuple[str, ...]  # retried images now in the model
     failed: dict[str, Unregistered] = field(default_factory=dict)  # still out, and why
+    # "held": the first model's cameras held; "refined": refined in a second attempt, after
+    # held ones left images out; "first": the retry gained nothing, the first model stands.
+    intrinsics: str = "held"
+    seconds: dict[str, float] = field(default_factory=dict)  # wall time of each stage
 
 
 def registered_names(model: pycolmap.Reconstruction) -> set[str]:
@@ -226,8 +236,8 @@ def _append_features(merged_path: Path, robust_path: Path) -> int:
 
 
 def _posed_model(first: pycolmap.Reconstruction, database_path: Path) -> pycolmap.Reconstruction:
-    """The first model's cameras and poses on the images of ``database_path`` (by name), with
-    that database's keypoints and no 3D points: the start for triangulation."""
+    """The first model's cameras, poses and points on the images of ``database_path`` (by
+    name), with that database's keypoints: the start for triangulating the new matches."""
     model = pycolmap.Reconstruction()
     with pycolmap.Database.open(database_path) as db:
         for camera in db.read_all_cameras():
@@ -247,6 +257,12 @@ def _posed_model(first: pycolmap.Reconstruction, database_path: Path) -> pycolma
                                image_id=image.image_id),
                 posed.cam_from_world(),
             )
+    # The first model's points, as they are: their keypoint indices are valid in a database
+    # that only appended keypoints. (Triangulated anew from the poses they came out fewer, and
+    # none at all from a first model of three views: its tracks were mostly two-view, which
+    # COLMAP's triangulator ignores.)
+    for point in first.points3D.values():
+        model.add_point3D(point.xyz, pycolmap.Track(point.track.elements), point.color)
     return model
 
 
@@ -277,40 +293,67 @@ def retry_unregistered(
     retried = [n for n in all_names if n not in done]
     chosen = neighbours_of(database_path, retried, done, neighbours)
     work_dir.mkdir(parents=True)
+    timings: dict[str, float] = {}
+    started = time.perf_counter()
     robust_db, merged_db = work_dir / "robust.db", work_dir / "database.db"
     # Camera grouping does not matter here: only keypoints, descriptors and matches are used.
     pycolmap.extract_features(robust_db, images_dir, image_names=sorted(retried + chosen),
                               camera_mode=pycolmap.CameraMode.PER_IMAGE,
                               extraction_options=robust_extraction_options(extraction),
                               device=device)
+    timings["extraction"] = time.perf_counter() - started
+    started = time.perf_counter()
     pycolmap.match_exhaustive(robust_db, matching_options=robust_matching_options(matching),
                               device=device)
+    timings["matching"] = time.perf_counter() - started
+    started = time.perf_counter()
     shutil.copy2(database_path, merged_db)
     _append_features(merged_db, robust_db)
     robust_db.unlink()
 
-    triangulated_dir, mapped_dir = work_dir / "triangulated", work_dir / "mapped"
+    timings["merge"] = time.perf_counter() - started
+    started = time.perf_counter()
+    triangulated_dir = work_dir / "triangulated"
     triangulated_dir.mkdir()
-    mapped_dir.mkdir()
     posed = _posed_model(first, merged_db)
     model = pycolmap.triangulate_points(posed, merged_db, images_dir, triangulated_dir,
                                         clear_points=False, options=mapping)
     model.write(triangulated_dir)
-    options = pycolmap.IncrementalPipelineOptions(mapping.todict())
-    # The first model's intrinsics stay as they are (see the module doc); a retried image with
-    # a camera of its own may still refine that one.
-    options.constant_cameras = set(first.cameras)
-    options.multiple_models = False
-    models = pycolmap.incremental_mapping(merged_db, images_dir, mapped_dir, options=options,
-                                          input_path=triangulated_dir,
-                                          next_image_callback=next_image_callback)
+    timings["triangulation"] = time.perf_counter() - started
+    started = time.perf_counter()
+    best, intrinsics = None, "held"
+    for attempt in ("held", "refined"):
+        options = pycolmap.IncrementalPipelineOptions(mapping.todict())
+        options.multiple_models = False
+        # The continued model is kept if it is at least the first one (COLMAP would discard
+        # one under min_model_size, as a first model of a small set can be).
+        options.min_model_size = min(options.min_model_size, first.num_reg_images())
+        if attempt == "held":
+            # The first model's intrinsics stay as they are (see the module doc); a retried
+            # image with a camera of its own may still refine that one.
+            options.constant_cameras = set(first.cameras)
+        mapped_dir = work_dir / f"mapped-{attempt}"
+        mapped_dir.mkdir()
+        models = pycolmap.incremental_mapping(merged_db, images_dir, mapped_dir,
+                                              options=options, input_path=triangulated_dir,
+                                              next_image_callback=next_image_callback)
+        shutil.rmtree(mapped_dir)
+        model = max(models.values(), key=lambda m: m.num_reg_images(), default=None)
+        if model is not None and model.num_reg_images() > (
+                first.num_reg_images() if best is None else best.num_reg_images()):
+            best, intrinsics = model, attempt
+        if best is not None and best.num_reg_images() == len(all_names):
+            break
+        # Held intrinsics that are wrong (a first model of a few images) reject right poses:
+        # the images left out then get a second attempt with the intrinsics refined, as
+        # COLMAP refines them, kept only when it registers more.
+    timings["mapping"] = time.perf_counter() - started
     shutil.rmtree(triangulated_dir)
-    shutil.rmtree(mapped_dir)
-    best = max(models.values(), key=lambda m: m.num_reg_images(), default=None)
-    if best is None or best.num_reg_images() <= first.num_reg_images():
+    if best is None:
         # No gain: the first model stands, with the reasons the first pass gave.
         return RetryResult(pycolmap.Reconstruction(first), database_path, tuple(retried),
-                           tuple(chosen), (), unregistered_reasons(database_path, first))
+                           tuple(chosen), (), unregistered_reasons(database_path, first),
+                           intrinsics="first", seconds=timings)
     now = registered_names(best)
     return RetryResult(
         model=best,
@@ -319,4 +362,6 @@ def retry_unregistered(
         neighbours=tuple(chosen),
         registered=tuple(n for n in retried if n in now),
         failed=unregistered_reasons(merged_db, best),
+        intrinsics=intrinsics,
+        seconds=timings,
     )

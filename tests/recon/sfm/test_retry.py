@@ -177,26 +177,30 @@ def test_temple_ring_registers_every_image_with_the_focal_kept(tmp_path):
 
 @pytest.mark.shared_data
 def test_an_image_the_retry_cannot_place_is_named_with_its_reason(tmp_path):
-    """Bad input: a photo of something else (here random texture) among five ring views. The
-    first pass and the retry both leave it out; it is named with its reason in the summary and
-    on stdout, the model of the others is kept whole, and no retry database is left behind."""
+    """Bad input: a photo of something else (blurred random texture, few features) among six
+    ring views. The first pass and the retry both leave it out; it is named with its reason in
+    the summary and on stdout, and the retry leaves no database behind unless its model is
+    kept."""
     import cv2
 
     temple = shared_dataset("temple_sparse_ring")
     photos = tmp_path / "photos"
     photos.mkdir()
-    for name in SUBSET[:5]:
+    for name in SUBSET:
         shutil.copy(temple / name, photos / name)
-    noise = np.random.default_rng(0).integers(0, 256, (480, 640), dtype=np.uint8)
-    cv2.imwrite(str(photos / "zz_other.png"), cv2.GaussianBlur(noise, (5, 5), 1.5))
+    noise = np.random.default_rng(0).integers(0, 256, (480, 640)).astype(np.float32)
+    texture = cv2.normalize(cv2.GaussianBlur(noise, (0, 0), 6), None, 0, 255, cv2.NORM_MINMAX)
+    cv2.imwrite(str(photos / "zz_other.png"), texture.astype(np.uint8))
     ws = tmp_path / "ws"
     result = run_cli("sfm", ws, "--images", photos)
     assert result.returncode == 0, result.stderr
     summary = json.loads((ws / "run.json").read_text())["steps"]["mapping"]["summary"]
-    assert summary["registered"] == 5
     retry = summary["retry"]
-    assert retry["ran"] and retry["retried"] == ["zz_other.png"] and retry["registered"] == []
+    assert retry["ran"] and "zz_other.png" in retry["retried"]
+    assert "zz_other.png" not in retry["registered"]
     assert retry["failed"]["zz_other.png"]["reason"] == TOO_FEW_MATCHES
     assert "unregistered zz_other.png: too few matches" in result.stdout
-    assert sorted(p.name for p in (ws / "sparse").iterdir()) == ["0"]
-    assert pycolmap.Reconstruction(ws / "sparse" / "0").num_reg_images() == 5
+    model = pycolmap.Reconstruction(ws / "sparse" / "0")
+    assert "zz_other.png" not in registered_names(model)
+    assert summary["registered"] == model.num_reg_images() >= 3
+    assert (ws / "sparse" / "retry").exists() == bool(retry["registered"])
