@@ -118,7 +118,7 @@ class SfMConfig:
         metadata={
             "help": "default: COLMAP's SIFT and matching; robust: affine-covariant, "
             "domain-size-pooled SIFT and guided matching from the start (slower, and less "
-            "precise keypoints: on the temple ring the focal came out 2-3% long)"
+            "precise keypoints: on the temple ring the focal came out 1.7-3.3 percent long)"
         },
     )
     matcher: Matcher = field(
