@@ -39,6 +39,8 @@ from recon.progress import bar, count_rows, polled
 from recon.sfm.images import camera_key
 from recon.sfm.retry import (
     RetryResult,
+    Unregistered,
+    retry_unregistered,
     robust_extraction_options,
     robust_matching_options,
     unregistered_reasons,
@@ -699,8 +701,6 @@ def _second_pass(
     (:func:`recon.sfm.retry.retry_unregistered`). Returns the model to keep and the report of
     the mapping summary's ``retry`` entry; the retry's database is left in ``work_dir``
     (``sparse/retry/database.db``) only when its model is kept."""
-    from recon.sfm.retry import retry_unregistered
-
     reasons = unregistered_reasons(ws.database_path, first)
     report: dict[str, Any] = {
         "unregistered_first_pass": {name: r.as_dict() for name, r in reasons.items()},
@@ -939,8 +939,6 @@ class SfMSummary:
 
 
 def _reason_text(reason: dict[str, Any]) -> str:
-    from recon.sfm.retry import Unregistered
-
     return Unregistered(**reason).describe()
 
 

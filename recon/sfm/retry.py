@@ -47,6 +47,8 @@ from typing import Any
 import numpy as np
 import pycolmap
 
+from recon.sfm.images import MIN_IMAGE_SIDE_PX
+
 TOO_FEW_MATCHES = "too-few-matches"
 AMBIGUOUS_POSE = "ambiguous-pose"
 # COLMAP's IncrementalMapperOptions.abs_pose_min_num_inliers default: a pose needs this many.
@@ -288,16 +290,26 @@ def retry_unregistered(
     Without a gain the returned model is a copy of ``first``.
     """
     with pycolmap.Database.open(database_path) as db:
-        all_names = sorted(im.name for im in db.read_all_images())
+        cameras = {c.camera_id: c for c in db.read_all_cameras()}
+        sizes = {im.name: (cameras[im.camera_id].width, cameras[im.camera_id].height)
+                 for im in db.read_all_images()}
+    all_names = sorted(sizes)
     done = registered_names(first)
     retried = [n for n in all_names if n not in done]
-    chosen = neighbours_of(database_path, retried, done, neighbours)
+    # COLMAP's covariant (affine-shape) detector crashes the process (SIGSEGV in
+    # vl_covdet_detect) on a 1x1 image, and no image this small registers anyway.
+    extracted = [n for n in retried if min(sizes[n]) >= MIN_IMAGE_SIDE_PX]
+    chosen = neighbours_of(database_path, extracted, done, neighbours)
     work_dir.mkdir(parents=True)
+    if not extracted:
+        shutil.rmtree(work_dir)
+        return RetryResult(pycolmap.Reconstruction(first), database_path, tuple(retried), (),
+                           (), unregistered_reasons(database_path, first), intrinsics="first")
     timings: dict[str, float] = {}
     started = time.perf_counter()
     robust_db, merged_db = work_dir / "robust.db", work_dir / "database.db"
     # Camera grouping does not matter here: only keypoints, descriptors and matches are used.
-    pycolmap.extract_features(robust_db, images_dir, image_names=sorted(retried + chosen),
+    pycolmap.extract_features(robust_db, images_dir, image_names=sorted(extracted + chosen),
                               camera_mode=pycolmap.CameraMode.PER_IMAGE,
                               extraction_options=robust_extraction_options(extraction),
                               device=device)
