@@ -267,6 +267,7 @@ def extract_features(
     reader = pycolmap.ImageReaderOptions(camera_model=config.camera_model)
     extraction = _extraction_options(config)
     if config.features == Features.ROBUST:
+        _refuse_tiny_images(ws, names)
         robust_extraction_options(extraction)
     colmap_mode = {
         CameraMode.SINGLE: pycolmap.CameraMode.SINGLE,
@@ -308,6 +309,24 @@ def extract_features(
         seconds=timer.seconds,
         summary={"images": num_images, "cameras": num_cameras, "keypoints": num_keypoints},
     )
+
+
+def _refuse_tiny_images(ws: Workspace, names: list[str]) -> None:
+    """COLMAP's covariant (affine-shape) SIFT detector crashes the process (SIGSEGV) on a 1x1
+    image, where the default detector skips it: refuse such images up front, by name."""
+    from PIL import Image
+
+    from recon.sfm.images import MIN_IMAGE_SIDE_PX
+
+    tiny = []
+    for name in names:
+        with Image.open(ws.images_dir / name) as image:
+            if min(image.size) < MIN_IMAGE_SIDE_PX:
+                tiny.append(f"{name} ({image.size[0]}x{image.size[1]})")
+    if tiny:
+        raise UserError(f"--features robust cannot read images under {MIN_IMAGE_SIDE_PX} px on a "
+                        f"side (COLMAP's affine-shape detector crashes on them): "
+                        f"{', '.join(tiny[:5])}; remove them or use the default features")
 
 
 def _extraction_options(config: SfMConfig) -> pycolmap.FeatureExtractionOptions:

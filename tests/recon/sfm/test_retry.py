@@ -136,6 +136,23 @@ def test_sfm_help_lists_the_new_options():
         assert flag in result.stdout
 
 
+def test_robust_features_refuse_a_tiny_image_by_name(tmp_path):
+    """Bad input: COLMAP's affine-shape detector kills the process on a 1x1 image (SIGSEGV),
+    so `--features robust` names it and stops with exit code 2 instead; nothing is written."""
+    from PIL import Image
+
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for index in range(2):
+        Image.new("L", (64, 48), 128 * index).save(photos / f"photo{index}.png")
+    Image.new("L", (1, 1)).save(photos / "tiny.png")
+    ws = tmp_path / "ws"
+    result = run_cli("sfm", ws, "--images", photos, "--features", "robust")
+    assert result.returncode == 2, result.stderr
+    assert "tiny.png (1x1)" in result.stderr and "Traceback" not in result.stderr
+    assert not (ws / "database.db").exists()
+
+
 def test_robust_features_are_refused_for_the_harris_front_end():
     with pytest.raises(UserError, match="--features robust"):
         SfMConfig(features="robust", front_end=FrontEnd.HARRIS_NCC)
