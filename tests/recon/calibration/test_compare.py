@@ -33,7 +33,8 @@ def test_compare_on_the_synthetic_scene(demo_ws):
     assert data == json.loads(json_copy.read_text())
     assert data["ground_truth_focal_px"] == pytest.approx(TRUE_FOCAL)
     assert set(data["methods"]) == {
-        "kruppa", "kruppa+ba", "colmap-default+ba", "view-graph", "view-graph+ba"
+        "kruppa", "kruppa-pp", "kruppa-per-image", "kruppa+ba", "colmap-default+ba",
+        "view-graph", "view-graph+ba"
     }
     for name, method in data["methods"].items():
         assert method["registered"] == method["images"] == 10, name
@@ -44,6 +45,21 @@ def test_compare_on_the_synthetic_scene(demo_ws):
         else:
             assert abs(method["rel_error"]) < 0.01, name  # within 1% on a generic scene
         assert method["seconds"] > 0 and method["mean_reproj_px"] < 1.0
+    # The variants say which mode ran and where their principal point is against the truth.
+    truth_pp = data["ground_truth_principal_point_px"]
+    assert truth_pp is not None
+    methods = data["methods"]
+    assert methods["kruppa"]["mode"] == "shared focal, principal point at centre"
+    assert methods["kruppa-per-image"]["mode"].startswith("per-image focal")
+    assert methods["kruppa-pp"]["mode"].startswith("shared focal, free principal point")
+    # Accepted or rejected, the principal point used stays near the truth (the demo's is the
+    # image centre) and a rejection is said in the notes.
+    assert methods["kruppa-pp"]["principal_point_error_px"] < 10.0
+    fit = methods["kruppa-pp"]["principal_point_fit"]
+    assert fit["status"] == "ok" or any("rejected" in n for n in methods["kruppa-pp"]["notes"])
+    assert methods["kruppa"]["principal_point_error_px"] < 1.0
+    assert "principal point" in result.outputs["report"].read_text()
+    assert result.outputs["principal_points_png"].stat().st_size > 1000
     # Kruppa alone: the focal is the closed-form estimate, held fixed in mapping.
     kruppa = data["methods"]["kruppa"]
     assert kruppa["focal_px"] == pytest.approx(kruppa["initial_focal_px"])
