@@ -160,3 +160,24 @@ def test_kruppa_falls_back_when_every_pair_is_singular(tmp_path):
     assert "ok" not in statuses and "near-singular" in statuses
     mapping = map_sparse(ws, config)
     assert mapping.summary["cameras"][0]["focal_px"] == pytest.approx(SYNTHETIC_FOCAL, rel=1e-3)
+
+
+def test_kruppa_per_image_gives_each_camera_its_focal(tmp_path):
+    """Features extracted with one camera per image: per-image mode gives every camera its
+    own focal prior (the demo's are all 600 px) and says so in the run record."""
+    out = tmp_path / "demo"
+    images, _, _ = make_scene(DemoConfig(out=out, num_views=10))
+    ws, _ = Workspace.create(out, images)
+    config = SfMConfig(
+        intrinsics="kruppa", intrinsics_options=("refine=false", "camera_mode=per-image"),
+        camera_mode="per-image",
+    )
+    summary = run_sfm(ws, config)
+    record = summary.steps["intrinsics"].summary
+    cameras = record["cameras"]
+    assert len(cameras) == 10
+    assert record["details"]["camera_mode"] == "per-image"
+    priors = [c["focal_px"] for c in cameras if c["prior"]]
+    assert len(priors) >= 8, record["notes"]  # a camera with only singular pairs falls back
+    assert all(abs(f / TRUE_FOCAL - 1) < 0.03 for f in priors), priors
+    assert all(c["source"].startswith("kruppa per-image") for c in cameras if c["prior"])
