@@ -367,6 +367,13 @@ class PerCameraConfig:
         default=True,
         metadata={"help": "refine the per-camera medians jointly by robust least squares"},
     )
+    max_relative_sigma: float = field(
+        default=0.25,
+        metadata={"help": "a camera whose refitted focal has a larger relative standard error "
+                          "gets none (the Gauss-Newton error is pessimistic: measured median 1%, "
+                          "99th percentile 9.5% on random 8-view scenes at 0.5 px, where every "
+                          "focal was within 1.5%)"},
+    )
     min_pairs: int = field(
         default=3,
         metadata={
@@ -407,6 +414,12 @@ def _pair_conditioning(F: np.ndarray, K_i: np.ndarray, K_j: np.ndarray, step: fl
         da, db = step * math.cos(angle), step * math.sin(angle)
         slopes.append((abs(r(da, db) - r0) + abs(r(-da, -db) - r0)) / (2.0 * step))
     return min(slopes)
+
+
+def _weight(conditioning: float, num_inliers: float) -> float:
+    # As the fusion's: per-pair error ≈ noise / conditioning, F's noise ∝ 1/√n. (Measured: after
+    # the joint refit, weights cond²·n, n or 1 give the same focals.)
+    return conditioning**2 * num_inliers
 
 
 def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
@@ -457,7 +470,7 @@ def estimate_focals_per_camera(
                        conditioning_i=one.conditioning, conditioning_j=one.conditioning,
                        status=f"shared camera: {one.status}")
             if one.status == PairStatus.OK and one.focal_px is not None:
-                values[ci].append((math.log(one.focal_px), one.conditioning**2 * n))
+                values[ci].append((math.log(one.focal_px), _weight(one.conditioning, n)))
             table.append(row)
             continue
         fi, fj = bougnoux_focals_px(pair.F, principal_points[ci], principal_points[cj])
@@ -472,7 +485,7 @@ def estimate_focals_per_camera(
         statuses = []
         for c, f, cond in ((ci, fi, cond_i), (cj, fj, cond_j)):
             if cond >= config.near_singular_threshold:
-                values[c].append((math.log(f), cond**2 * n))
+                values[c].append((math.log(f), _weight(cond, n)))
                 statuses.append("ok")
             else:
                 statuses.append("near-singular")
@@ -498,6 +511,10 @@ def estimate_focals_per_camera(
     result = {}
     for c in cameras:
         f = refined.get(c)
+        if f is not None and c in sigmas and not sigmas[c] <= config.max_relative_sigma:
+            too_few[c] = (f"its focal {math.exp(f):.1f} px is uncertain (relative standard "
+                          f"error {sigmas[c]:.3g} > {config.max_relative_sigma})")
+            f = None
         result[c] = CameraFocal(
             camera=c,
             focal_px=math.exp(f) if f is not None else None,
@@ -505,8 +522,8 @@ def estimate_focals_per_camera(
             sigma_px=math.exp(f) * sigmas[c] if f is not None and c in sigmas else None,
             num_pairs_used=len(values[c]),
             num_pairs=counts[c],
-            message="" if c in medians else too_few.get(
-                c, "no non-singular pair constrains this camera"),
+            message=too_few.get(c, "" if c in medians
+                                else "no non-singular pair constrains this camera"),
         )
     return result, table
 
@@ -558,9 +575,5 @@ def _refine_per_camera(
         sigmas = {c: float(math.sqrt(max(cov[k, k], 0.0))) for c, k in index.items()}
     except np.linalg.LinAlgError:
         pass
-    # A refit that wanders far from the medians (an ill-posed camera) keeps the median.
-    out = {}
-    for c, k in index.items():
-        value = float(x[k]) + math.log(scale)
-        out[c] = value if abs(value - start_log_f[c]) < 0.2 else start_log_f[c]
+    out = {c: float(x[k]) + math.log(scale) for c, k in index.items()}
     return out, sigmas
