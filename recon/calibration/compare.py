@@ -277,6 +277,11 @@ def _write_outputs(
         )
     principal = {n: m["principal_point_px"] for n, m in methods.items()
                  if m.get("principal_point_px")}
+    for n, m in methods.items():
+        fit = m.get("principal_point_fit") or {}
+        if fit.get("principal_point_px") and fit.get("status") != "ok":
+            # The rejected estimate too: how far the pairs alone would have put it.
+            principal[f"{n} fit, {fit['status']}"] = fit["principal_point_px"]
     if principal:
         first = next(iter(methods.values()))
         size = _image_size(ws)

@@ -8,7 +8,7 @@ import pytest
 
 from recon.calibration.compare import CompareConfig, compare_intrinsics
 from recon.demo import DemoConfig, make_scene
-from recon.sfm.pipeline import SfMConfig, run_sfm
+from recon.sfm.pipeline import CameraMode, SfMConfig, run_sfm
 from recon.workspace import Workspace
 from tests.helpers import read_recording, recording_entities, run_cli, shared_dataset
 
@@ -170,7 +170,7 @@ def test_kruppa_per_image_gives_each_camera_its_focal(tmp_path):
     ws, _ = Workspace.create(out, images)
     config = SfMConfig(
         intrinsics="kruppa", intrinsics_options=("refine=false", "camera_mode=per-image"),
-        camera_mode="per-image",
+        camera_mode=CameraMode.PER_IMAGE,
     )
     summary = run_sfm(ws, config)
     record = summary.steps["intrinsics"].summary
