@@ -22,7 +22,8 @@ the cameras), so the estimate is gated:
 - at least ``min_pairs`` ok pairs, spanning at least three images;
 - its standard error (Gauss-Newton covariance at the optimum, scaled by the residuals' spread
   and inflated for pairs sharing images as in :mod:`recon.calibration.fusion`) below
-  ``max_principal_point_sigma_factor × max(w, h)``;
+  ``max_principal_point_sigma_factor × max(w, h)`` (an axis above it is held at the centre
+  and the rest refitted), and the focal's below ``max_relative_focal_sigma``;
 - inside the image.
 
 A principal point failing a gate is rejected: the caller keeps the centre and the closed
@@ -152,6 +153,14 @@ class PrincipalPointConfig:
             "help": "residual scale of the Cauchy loss on (σ1-σ2)/(σ1+σ2); measured on random "
             "8-view scenes at 1 px, 20 px off-centre: 0.001 → 0.48% focal error, 0.005 → "
             "0.29%, 0.02 → 0.22%, 0.1 → 0.23%"
+        },
+    )
+    max_relative_focal_sigma: float = field(
+        default=0.05,
+        metadata={
+            "help": "reject the fit when its focal's relative standard error exceeds this "
+            "(FusionConfig.max_relative_sigma's value; accepted fits on random 8-view scenes "
+            "and the 5-view thesis scene at 0.1 px: at most 0.026)"
         },
     )
     max_principal_point_sigma_factor: float = field(
@@ -323,6 +332,12 @@ def estimate_focal_and_principal_point(
             message=f"principal point {where} lies outside the {width}x{height} image",
         )
     constrained = [v for v in sigma_pp if math.isfinite(v)]
+    if not sigma_focal <= config.max_relative_focal_sigma * focal:
+        return PrincipalPointEstimate(
+            status=PrincipalPointStatus.POORLY_CONSTRAINED, **common,
+            message=f"the focal {focal:.1f} ±{sigma_focal:.1f} px of the fit with principal "
+            f"point {where} is too uncertain (more than {config.max_relative_focal_sigma:.0%})",
+        )
     if len(held) == 2 or not constrained or max(constrained) > limit:
         return PrincipalPointEstimate(
             status=PrincipalPointStatus.POORLY_CONSTRAINED, **common,
