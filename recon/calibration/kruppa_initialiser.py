@@ -156,7 +156,8 @@ class KruppaInitialiser(Plugin):
             default=FundamentalSource.COLMAP,
             metadata={
                 "help": "colmap: the F of each verified two-view geometry in the database; "
-                "refit: F re-estimated from its inliers (LMedS, then the normalised 8-point)"
+                "refit: F re-estimated from its inliers (LMedS, then the normalised 8-point); "
+                "refit-sampson: that F refined on the inliers' Sampson distances"
             },
         )
         accept_low_confidence: bool = field(
