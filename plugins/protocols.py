@@ -72,6 +72,9 @@ class FocalPrior:
     """Focal length in pixels, or None for COLMAP's default guess 1.2·max(w, h) (not a prior)."""
     source: str
     """How it was obtained, in words, for the run record and the summary."""
+    principal_point_px: tuple[float, float] | None = None
+    """``(cx, cy)`` in pixels (COLMAP's convention, pixel centres at +0.5), or None to keep the
+    camera's (COLMAP's default: the image centre). Held fixed by bundle adjustment."""
 
 
 @dataclass(frozen=True, kw_only=True)

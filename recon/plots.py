@@ -81,3 +81,30 @@ def error_curves(
     ax.set_title(title)
     ax.legend(fontsize=8)
     return _save(fig, path)
+
+
+def principal_points(
+    path: Path,
+    points_px: Mapping[str, Sequence[float]],
+    *,
+    truth_px: Sequence[float] | None,
+    image_size: tuple[int, int] | None,
+    title: str,
+) -> Path:
+    """Each method's principal point (x right, y down, in px) with the truth and the centre."""
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    for name, (x, y) in points_px.items():
+        ax.scatter([x], [y], s=30, label=f"{name} ({x:.1f}, {y:.1f})")
+    if truth_px is not None:
+        ax.scatter([truth_px[0]], [truth_px[1]], marker="x", s=80, color="black",
+                   label=f"truth ({truth_px[0]:.1f}, {truth_px[1]:.1f})")
+    if image_size is not None:
+        ax.scatter([image_size[0] / 2], [image_size[1] / 2], marker="+", s=80, color="grey",
+                   label="image centre")
+    ax.invert_yaxis()
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("cx (px)")
+    ax.set_ylabel("cy (px)")
+    ax.set_title(title)
+    ax.legend(fontsize=7)
+    return _save(fig, path)

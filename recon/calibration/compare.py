@@ -8,6 +8,7 @@ each branch is an ordinary workspace that COLMAP or `mocap view` can open. Outpu
     WS/compare/report.md         the same as Markdown, with the per-pair Kruppa table
     WS/compare/pairs.png         per-pair Kruppa focal, the fused value and the truth
     WS/compare/errors.png        relative focal error by method
+    WS/compare/principal_points.png  each method's principal point against the truth
     WS/logs/compare.rrd          the same figures in Rerun
 """
 
@@ -40,6 +41,8 @@ class Method:
 
 METHODS: tuple[Method, ...] = (
     Method("kruppa", "kruppa", ("refine=false",)),
+    Method("kruppa-pp", "kruppa-pp", ("refine=false",)),
+    Method("kruppa-per-image", "kruppa", ("refine=false", "camera_mode=per-image")),
     Method("kruppa+ba", "kruppa", ("refine=true",)),
     Method("colmap-default+ba", "colmap-default"),
     Method("view-graph", "view-graph", ("refine=false",)),
@@ -79,8 +82,10 @@ class Comparison:
     outputs: dict[str, Path]
 
     def as_json(self) -> dict[str, Any]:
+        truth_pp = self.ground_truth.principal_point_px if self.ground_truth else None
         return {
             "ground_truth_focal_px": self.ground_truth.focal_px if self.ground_truth else None,
+            "ground_truth_principal_point_px": list(truth_pp) if truth_pp else None,
             "ground_truth_source": self.ground_truth.source if self.ground_truth else None,
             "methods": self.methods,
             "kruppa_fused": self.fused,
@@ -89,20 +94,28 @@ class Comparison:
 
     def lines(self) -> list[str]:
         truth = self.ground_truth
+        truth_pp = truth.principal_point_px if truth else None
         out = [
             f"ground truth: {truth.focal_px:.1f} px ({truth.source})" if truth
             else "ground truth: none given (--gt)",
+            *([f"ground truth principal point: ({truth_pp[0]:.1f}, {truth_pp[1]:.1f}) px"]
+              if truth_pp else []),
             "",
             f"{'method':<20}{'focal px':>10}{'error':>9}{'registered':>12}{'reproj px':>11}"
-            f"{'seconds':>9}",
+            f"{'seconds':>9}{'principal point px':>22}{'pp error':>10}  mode",
         ]
         for name, m in self.methods.items():
             err = "" if m["rel_error"] is None else f"{100 * m['rel_error']:+.2f}%"
             focal = "failed" if m["focal_px"] is None else f"{m['focal_px']:.1f}"
             reproj = "" if m["mean_reproj_px"] is None else f"{m['mean_reproj_px']:.3f}"
+            pp = m.get("principal_point_px")
+            pp_text = f"({pp[0]:.1f}, {pp[1]:.1f})" if pp else ""
+            pp_err = m.get("principal_point_error_px")
+            pp_err_text = f"{pp_err:.1f}" if pp_err is not None else ""
             out.append(
                 f"{name:<20}{focal:>10}{err:>9}{m['registered']:>7} of {m['images']:<3}"
-                f"{reproj:>10}{m['seconds']:>9.1f}"
+                f"{reproj:>10}{m['seconds']:>9.1f}{pp_text:>22}{pp_err_text:>10}"
+                f"  {m.get('mode', '')}"
                 + ("  (fell back to colmap-default)" if m.get("fallback") else "")
             )
         ok = sum(p["status"] == "ok" for p in self.pairs)
@@ -140,12 +153,23 @@ def _run_method(ws: Workspace, method: Method, sfm: SfMConfig, overwrite: bool) 
                           "intrinsics_options": method.options, "refine_focal": None})
     intrinsics = initialise_intrinsics(branch, config, overwrite=overwrite)
     priors = [c["focal_px"] for c in intrinsics.summary["cameras"] if c["prior"]]
+    applied = intrinsics.summary["cameras"]
+    points = [c["principal_point_px"] for c in applied if c.get("principal_point_px")]
+    details = intrinsics.summary.get("details", {})
     result: dict[str, Any] = {
         "plugin": method.plugin,
         "options": list(method.options),
         "initial_focal_px": priors[0] if priors else None,
         "notes": intrinsics.summary.get("notes", []),
         "images": len(ws.image_names()),
+        # The principal point mapping starts from and holds (COLMAP does not refine it by
+        # default): the image centre unless the initialiser estimated one.
+        "principal_point_px": (
+            [sum(p[0] for p in points) / len(points), sum(p[1] for p in points) / len(points)]
+            if points else None
+        ),
+        "mode": _mode(method, details, len(applied)),
+        "principal_point_fit": details.get("principal_point") or None,
     }
     try:
         mapping = map_sparse(branch, config, overwrite=overwrite)
@@ -159,11 +183,28 @@ def _run_method(ws: Workspace, method: Method, sfm: SfMConfig, overwrite: bool) 
     return result | {
         "fallback": bool(details.get("fallback", False)),
         "focal_px": sum(c["focal_px"] for c in cams) / len(cams),
+        "focal_px_per_camera": {str(c["camera_id"]): c["focal_px"] for c in cams},
         "registered": mapping.summary["registered"],
         "mean_reproj_px": mapping.summary["mean_reprojection_error_px"],
         "seconds": intrinsics.seconds + mapping.seconds,
         "details": intrinsics.summary.get("details", {}),
     }
+
+
+def _mode(method: Method, details: dict[str, Any], num_cameras: int) -> str:
+    """Which Kruppa variant ran, in words, for the report."""
+    if not method.plugin.startswith("kruppa"):
+        return ""
+    if details.get("camera_mode") == "per-image":
+        return f"per-image focal ({num_cameras} camera(s))"
+    if details.get("principal_point_mode") == "free":
+        fit = details.get("principal_point") or {}
+        held = fit.get("held_at_centre") or []
+        state = fit.get("status", "not fit")
+        if state == "ok" and held:
+            state = f"ok, c{held[0]} held at centre"
+        return f"shared focal, free principal point ({state})"
+    return "shared focal, principal point at centre"
 
 
 def compare_intrinsics(
@@ -184,8 +225,18 @@ def compare_intrinsics(
             (entry["focal_px"] - truth.focal_px) / truth.focal_px
             if truth is not None and entry["focal_px"] is not None else None
         )
+        pp = entry.get("principal_point_px")
+        entry["principal_point_error_px"] = (
+            math.dist(pp, truth.principal_point_px)
+            if truth is not None and truth.principal_point_px is not None and pp else None
+        )
         methods[method.name] = entry
-    kruppa = next((m for m in methods.values() if m["plugin"] == "kruppa"), None)
+    # The per-pair table of the centred closed form (the thesis' Table 4.1).
+    kruppa = next(
+        (m for m in methods.values()
+         if m["plugin"] == "kruppa" and "camera_mode=per-image" not in m["options"]),
+        None,
+    )
     details = kruppa.get("details", {}) if kruppa else {}
     pairs, fused = details.get("pairs", []), details.get("fused", {})
     for entry in methods.values():
@@ -224,6 +275,21 @@ def _write_outputs(
             fused_px=fused.get("focal_px"),
             title=f"Kruppa focal per image pair ({ws.root.name})",
         )
+    principal = {n: m["principal_point_px"] for n, m in methods.items()
+                 if m.get("principal_point_px")}
+    for n, m in methods.items():
+        fit = m.get("principal_point_fit") or {}
+        if fit.get("principal_point_px") and fit.get("status") != "ok":
+            # The rejected estimate too: how far the pairs alone would have put it.
+            principal[f"{n} fit, {fit['status']}"] = fit["principal_point_px"]
+    if principal:
+        first = next(iter(methods.values()))
+        size = _image_size(ws)
+        outputs["principal_points_png"] = plots.principal_points(
+            folder / "principal_points.png", principal,
+            truth_px=truth.principal_point_px if truth else None, image_size=size,
+            title=f"Principal point by method ({ws.root.name}, {first['images']} images)",
+        )
     if truth is not None:
         outputs["errors_png"] = plots.method_errors(
             folder / "errors.png",
@@ -236,12 +302,36 @@ def _write_outputs(
     return outputs
 
 
+def _image_size(ws: Workspace) -> tuple[int, int] | None:
+    from PIL import Image
+
+    names = ws.image_names()
+    if not names:
+        return None
+    with Image.open(ws.images_dir / names[0]) as image:
+        return image.size
+
+
 def _write_report(path: Path, ws: Workspace, c: Comparison, outputs: dict[str, Path]) -> None:
     """Markdown report; ``c`` carries no outputs yet, so its summary lists none."""
     lines = [f"# Focal self-calibration compared: {ws.root.name}", ""]
     lines += ["```", *c.lines(), "```", ""]
     if "errors_png" in outputs:
         lines += ["![focal error by method](errors.png)", ""]
+    if "principal_points_png" in outputs:
+        lines += ["![principal point by method](principal_points.png)", ""]
+    fits = {n: m for n, m in c.methods.items() if m.get("mode")}
+    if fits:
+        lines += ["## Kruppa variants", "",
+                  "| method | mode | focal px | principal point px | notes |",
+                  "|---|---|---|---|---|"]
+        for name, m in fits.items():
+            pp = m.get("principal_point_px")
+            pp_text = f"({pp[0]:.1f}, {pp[1]:.1f})" if pp else ""
+            focal = "" if m["focal_px"] is None else f"{m['focal_px']:.1f}"
+            notes = "; ".join(m.get("notes", [])).replace("|", "/")
+            lines.append(f"| {name} | {m['mode']} | {focal} | {pp_text} | {notes} |")
+        lines.append("")
     if c.pairs:
         lines += [
             "## Kruppa per image pair (thesis Table 4.1)", "",
@@ -265,6 +355,8 @@ def _log(ws: Workspace, c: Comparison) -> Path:
         rows = [
             {"method": n, "focal_px": m["focal_px"] if m["focal_px"] is not None else "failed",
              "rel_error": m["rel_error"] if m["rel_error"] is not None else "",
+             "principal_point_px": str(m.get("principal_point_px") or ""),
+             "mode": m.get("mode", ""),
              "registered": m["registered"], "seconds": m["seconds"]}
             for n, m in c.methods.items()
         ]

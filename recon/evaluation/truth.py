@@ -241,6 +241,8 @@ class GroundTruth:
     cameras: dict[str, Camera] | None
     """Per-image cameras when the source has poses (not for a bare K.txt)."""
     source: str
+    principal_point_px: tuple[float, float] | None = None
+    """Mean ``(cx, cy)`` over the cameras, in pixels (in the ground truth's own convention)."""
 
 
 def read_k_txt(path: Path) -> np.ndarray:
@@ -289,7 +291,8 @@ def load_ground_truth(path: Path) -> GroundTruth:
         cameras, kind = read_middlebury_par(path), "Middlebury par"
     elif path.is_file() and path.suffix == ".txt":
         K = read_k_txt(path)
-        return GroundTruth(float(0.5 * (K[0, 0] + K[1, 1])), None, f"K matrix {path}")
+        return GroundTruth(float(0.5 * (K[0, 0] + K[1, 1])), None, f"K matrix {path}",
+                           (float(K[0, 2]), float(K[1, 2])))
     else:
         raise ValueError(
             f"{path}: not a ground truth this tool reads (Middlebury *_par.txt, a folder of "
@@ -298,4 +301,5 @@ def load_ground_truth(path: Path) -> GroundTruth:
     if not cameras:
         raise ValueError(f"{path}: no cameras in this {kind}")
     focal = float(np.mean([c.focal_px for c in cameras.values()]))
-    return GroundTruth(focal, cameras, f"{kind} {path}")
+    pp = np.mean([c.K[:2, 2] for c in cameras.values()], axis=0)
+    return GroundTruth(focal, cameras, f"{kind} {path}", (float(pp[0]), float(pp[1])))

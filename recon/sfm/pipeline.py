@@ -617,6 +617,14 @@ def _write_focal_priors(database_path: Path, result: IntrinsicsResult) -> list[d
                     )
                 camera.focal_length = float(prior.focal_px)
                 camera.has_prior_focal_length = True
+            if prior.principal_point_px is not None:
+                cx, cy = (float(v) for v in prior.principal_point_px)
+                if not (0 <= cx <= camera.width and 0 <= cy <= camera.height):
+                    raise UserError(
+                        f"intrinsics plugin gave principal point ({cx}, {cy}) for camera "
+                        f"{camera.camera_id}, outside its {camera.width}x{camera.height} image"
+                    )
+                camera.principal_point_x, camera.principal_point_y = cx, cy
             db.update_camera(camera)
             applied.append(
                 {
@@ -624,6 +632,8 @@ def _write_focal_priors(database_path: Path, result: IntrinsicsResult) -> list[d
                     "focal_px": float(camera.focal_length),
                     "prior": prior.focal_px is not None,
                     "source": prior.source,
+                    "principal_point_px": [float(camera.principal_point_x),
+                                           float(camera.principal_point_y)],
                 }
             )
     return applied

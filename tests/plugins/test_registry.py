@@ -87,7 +87,7 @@ def test_plugin_that_cannot_import_fails_loudly(monkeypatch):
 
 
 def test_unknown_plugin_names_the_alternatives():
-    expected = r"available: colmap-default, exif, fixed, kruppa, view-graph$"
+    expected = r"available: colmap-default, exif, fixed, kruppa, kruppa-pp, view-graph$"
     with pytest.raises(plugins.PluginError, match=expected):
         plugins.create("intrinsics", "nope")
 
