@@ -595,6 +595,13 @@ def log_frame_scalar(rec: rr.RecordingStream, entity: str, value: float, frame: 
         rec.log(entity, rr.Scalars(float(value)))
 
 
+def log_frame_text(rec: rr.RecordingStream, entity: str, text: str, level: str, frame: int,
+                   time_s: float) -> None:  # fmt: skip
+    """A line of text (level: Rerun's "INFO", "WARN", ...) at this frame."""
+    with _at_frame(rec, frame, time_s):
+        rec.log(entity, rr.TextLog(text, level=level))
+
+
 # Default blueprints ---------------------------------------------------------------------------
 # One builder per step, registered here and sent by `step_recording`; README.md ("Recordings")
 # describes each in one line. A builder takes the camera entities the step logged
@@ -725,7 +732,9 @@ def _track(cameras: Sequence[str]) -> rrb.Blueprint:
                 rrb.Spatial3DView(origin="world", name="body over the cameras"),
                 rrb.Horizontal(rrb.TimeSeriesView(origin="track/energy_px", name="energy (px)"),
                                rrb.TimeSeriesView(origin="track/xor_fraction",
-                                                  name="XOR fraction of the silhouette")),
+                                                  name="XOR fraction of the silhouette"),
+                               rrb.TextLogView(origin="track/status",
+                                               name="frame status (lost, recovered)")),
                 row_shares=[3, 1]),
             rrb.Grid(*_camera_views(cameras), name="XOR per camera"),
             column_shares=[3, 2]),

@@ -114,6 +114,11 @@ class TrackCommand:
             print(f"warning: the subject was lost in {len(summary['lost'])} of "
                   f"{summary['frames']} frames (see the events above): tracks/pose.json has no "
                   "pose for them and motion.bvh repeats the last tracked one", file=sys.stderr)
+        if summary.get("recovered"):  # older runs lack it
+            print(f"recovered  frames {summary['recovered']} (found again by the start search)")
+        if summary.get("diverged"):
+            print(f"diverged   frames {summary['diverged']} (far above this subject's usual XOR "
+                  "and not found again: their poses are kept, but not trusted)")
         for frame, event in summary.get("events", {}).items():
             print(f"frame {frame:>5}: {event}")
         print(f"outputs    {ws.tracks_dir}/joints.csv, pose.json, motion.bvh, subject.glb; "

@@ -9,7 +9,10 @@ or `mocap silhouettes`) and writes, each atomically:
 * ``tracks/pose.json``: ``{"frame_rate", "shape": {BodyShape}, "body": {"name": the body
   model plugin, and what rebuilds its subject, e.g. mpfb's "macro"}, "world_from_upright":
   (3, 3), "frames": [{"frame", "params" (26, POSE_LAYOUT order) or null when lost, "energy_px",
-  "xor_fraction", "event"}]}``;
+  "xor_fraction", "event", "status"}], "lost", "diverged", "recovered": [frame, ...]}``: a
+  frame's status is one of `tracking.track.tracker.STATUSES` (init, tracked, recovered,
+  diverged: a pose kept but not trusted, lost: no pose), and the three lists name the frames
+  of the last three (`status_lists`);
 * ``tracks/motion.bvh``: the tracked frames on the body skeleton (`tracking.body.motion`); a
   BVH has no gaps, so a lost frame repeats the last tracked pose (pose.json says which);
 * ``tracks/subject.glb``: the subject's mesh (the body model's full resolution) skinned on
@@ -18,8 +21,10 @@ or `mocap silhouettes`) and writes, each atomically:
 * ``tracks/meshes/<frame:06d>.ply`` with ``--meshes``: that mesh posed in each tracked frame,
   world frame, metres;
 * ``logs/track.rrd``: silhouettes and the XOR overlay per camera over the video frame
-  (`TrackStepConfig.logged_images` of them), the body mesh and skeleton, and the energy per
-  frame, on the ``frame`` and ``time`` timelines.
+  (`TrackStepConfig.logged_images` of them), the body mesh and skeleton, the energy per
+  frame, and each frame's status (``track/status``: a text log, lost and diverged frames as
+  warnings; ``track/status_index``: its index in `STATUSES`), on the ``frame`` and ``time``
+  timelines.
 
 The poses, the BVH and the recording are in the *upright frame* of the camera rig
 (`tracking.rig.cameras.upright_frame`): Y up, as the body model, BVH and OpenSim expect, and the
@@ -50,7 +55,13 @@ from tracking.body.motion import read_pose_file
 from tracking.rig.video import read_frames
 from tracking.silhouettes.step import UNKNOWN_NAME
 from tracking.track.render import render_views
-from tracking.track.tracker import FrameResult, SilhouetteTracker, TrackConfig, TrackingLost
+from tracking.track.tracker import (
+    STATUSES,
+    FrameResult,
+    SilhouetteTracker,
+    TrackConfig,
+    TrackingLost,
+)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -170,7 +181,8 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         init_pose = pose_in_frame(init_pose, world_from_upright.T @ given.world_from_upright)
     upright = [c.in_frame(world_from_upright) for c in cameras]
     tracker = SilhouetteTracker(upright, config, model=init_model,
-                                unknown=unknown_pixels(ws, cameras))
+                                unknown=unknown_pixels(ws, cameras),
+                                frame_interval_s=1.0 / frame_rate)
     results: list[FrameResult] = []
 
     logged = {frames[i] for i in np.unique(np.linspace(
@@ -203,6 +215,8 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
     summary = {
         "frames": len(results), "tracked": len(tracked),
         "lost": [r.frame for r in results if r.pose is None],
+        "diverged": [r.frame for r in results if r.status == "diverged"],
+        "recovered": [r.frame for r in results if r.status == "recovered"],
         "events": {str(r.frame): r.event for r in results if r.event},
         "median_xor_fraction": float(np.median([r.xor_fraction for r in tracked])),
         "seconds_per_frame": timer.seconds / len(results),
@@ -268,6 +282,15 @@ def _upright_frame(cameras: Sequence[Any], masks: Sequence[np.ndarray]) -> np.nd
     return upright_frame(cameras, subject)
 
 
+def status_lists(results: Sequence[FrameResult]) -> dict[str, list[int]]:
+    """pose.json's summary of the frames' `FrameResult.status`: the frames lost (no pose),
+    diverged (a divergence that the start search found nothing better for: the best pose is
+    kept, but not trusted) and recovered (found again by the start search after a divergence
+    or after lost frames)."""
+    return {name: [r.frame for r in results if r.status == name]
+            for name in ("lost", "diverged", "recovered")}
+
+
 def _write_outputs(outputs: dict[str, Path], results: list[FrameResult], model: TrackedModel,
                    frame_rate: float, world_from_upright: np.ndarray) -> None:  # fmt: skip
     from tracking.body.bvh import write_bvh
@@ -289,11 +312,12 @@ def _write_outputs(outputs: dict[str, Path], results: list[FrameResult], model: 
         "shape": dataclasses.asdict(model.shape),
         "body": model.record(),
         "world_from_upright": world_from_upright.tolist(),
+        **status_lists(results),
         "frames": [{"frame": r.frame,
                     "params": None if r.pose is None else [float(v) for v in r.pose.params],
                     "energy_px": None if not np.isfinite(r.energy) else r.energy,
                     "xor_fraction": None if not np.isfinite(r.energy) else r.xor_fraction,
-                    "event": r.event} for r in results],
+                    "event": r.event, "status": r.status} for r in results],
     })  # fmt: skip
     held: list[Pose] = []
     last = next(r.pose for r in results if r.pose is not None)
@@ -393,6 +417,13 @@ class _Recorder:
                 if index == result.frame:
                     r.log_frame_image(self.rec, f"world/cameras/{r.entity_name(name)}/image",
                                       image, result.frame, t)  # fmt: skip
+        # The frame's status as a text log (lost and diverged frames as warnings) and as a
+        # scalar (its index in STATUSES) on the frame timeline.
+        level = "WARN" if result.status in ("lost", "diverged") else "INFO"
+        r.log_frame_text(self.rec, "track/status", f"{result.status}: {result.event}"
+                         if result.event else result.status, level, result.frame, t)
+        r.log_frame_scalar(self.rec, "track/status_index", STATUSES.index(result.status),
+                           result.frame, t)  # fmt: skip
         if result.pose is None or tracker.model is None:
             if np.isfinite(result.energy):
                 r.log_frame_scalar(self.rec, "track/xor_fraction", result.xor_fraction,

@@ -131,3 +131,21 @@ def test_the_blueprint_shows_body_cameras_and_energy_on_the_frame_timeline(track
     assert rec.rows("track/energy_px", "frame") == list(range(FRAMES))
     assert rec.rows("world/body/mesh", "frame") == list(range(FRAMES))
 
+
+def test_each_frame_status_is_logged_and_written_to_pose_json(tracked):
+    """Issue 20: a text log per frame (lost and diverged frames as warnings), its index in
+    STATUSES as a scalar, and the same status in pose.json with the lists of lost, diverged
+    and recovered frames."""
+    import json
+
+    ws, rec = tracked
+    assert ("TextLog", "track/status") in {(v["kind"], v["origin"]) for v in rec.views}
+    assert rec.rows("track/status", "frame") == list(range(FRAMES))
+    texts = [row[0] for row in rec.rows("track/status", "TextLog:text")]
+    assert texts[0].startswith("init: init from the given pose") and texts[1:] == ["tracked"] * 2
+    assert [row[0] for row in rec.rows("track/status", "TextLog:level")] == ["INFO"] * FRAMES
+    assert rec.rows("track/status_index", "frame") == list(range(FRAMES))
+    pose = json.loads((ws / "tracks" / "pose.json").read_text())
+    assert [f["status"] for f in pose["frames"]] == ["init", "tracked", "tracked"]
+    assert (pose["lost"], pose["diverged"], pose["recovered"]) == ([], [], [])
+

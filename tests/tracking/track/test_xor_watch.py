@@ -1,0 +1,65 @@
+"""The relative divergence test (`tracking.track.divergence.XorWatch`) on synthetic sequences
+of XOR fractions (issue 20)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from tracking.track.divergence import WatchConfig, XorWatch
+
+WATCH = WatchConfig(spike_factor=1.6, high_factor=1.3, high_frames=3, window=15,
+                    min_margin=0.03)
+"""The relative tests with the tracker's defaults (`tracking.track.tracker.SPIKE_XOR_FACTOR` ...,
+where they were measured)."""
+
+
+def _verdicts(watch: XorWatch, sequence) -> list[str]:
+    """Each frame's verdict, every frame then kept as tracked (no recovery, no restart)."""
+    out = []
+    for value in sequence:
+        out.append(watch.verdict(value))
+        watch.accept(value)
+    return out
+
+
+def test_steady_tracking_raises_no_divergence():
+    """Measured on the mismatched mpfb subject: 9-12% XOR frame to frame over the CMU walk and
+    wave at 30 fps (README). Noise of that size, for 300 frames, is never flagged."""
+    rng = np.random.default_rng(0)
+    sequence = np.clip(0.10 + 0.01 * rng.standard_normal(300), 0.08, 0.13)
+    assert not any(_verdicts(XorWatch(WATCH), sequence))
+
+
+def test_a_spike_is_flagged_at_once_and_a_slide_after_some_frames():
+    watch = XorWatch(WATCH)
+    assert _verdicts(watch, [0.10] * 5) == [""] * 5
+    spike = 0.10 * WATCH.spike_factor + 0.01
+    assert "this subject's recent median 10.0%" in watch.verdict(spike)
+    assert watch.verdict(0.10 * WATCH.spike_factor - 0.01) == ""
+    # A slide above the high bar but under the spike: flagged on its high_frames-th frame, and
+    # its frames do not raise the reference.
+    slide = 0.5 * (WATCH.high_factor + WATCH.spike_factor) * 0.10
+    verdicts = _verdicts(watch, [slide] * WATCH.high_frames)
+    assert verdicts[:-1] == [""] * (WATCH.high_frames - 1)
+    assert f"for {WATCH.high_frames} frames in a row" in verdicts[-1]
+    assert watch.reference() == pytest.approx(0.10)
+    # Back under the bar: the streak ends.
+    watch.accept(0.10)
+    assert watch.streak == 0 and watch.verdict(slide) == ""
+
+
+def test_the_bars_keep_a_margin_over_a_small_median_and_restart_at_a_new_level():
+    """Clean renders of the tracker's own model reach ~2% XOR: 4% is not a divergence."""
+    watch = XorWatch(WATCH)
+    _verdicts(watch, [0.02, 0.018, 0.022, 0.02])
+    assert watch.verdict(0.02 + WATCH.min_margin - 0.005) == ""
+    assert watch.verdict(0.02 + WATCH.min_margin + 0.005) != ""
+    # A recovery that found nothing better restarts the reference at what the model reaches.
+    watch.restart(0.2)
+    assert _verdicts(watch, [0.2, 0.21, 0.2, 0.22]) == [""] * 4
+    # Off: nothing is flagged.
+    off = XorWatch(dataclasses.replace(WATCH, spike_factor=0.0, high_frames=0))
+    assert not any(_verdicts(off, [0.1] * 5 + [0.5] * 10))

@@ -1,0 +1,100 @@
+"""Knowing when the tracker is lost, relative to what the model reached on this subject
+(issue 20): pure bookkeeping of the XOR fractions of tracked frames, no images.
+
+The absolute bar of `tracking.track.tracker` (``max_xor_fraction`` of the silhouette area, or
+1.5 times the best start's XOR) lets a wrong track through when the model fits this subject
+well: a track that went from 10% to 30% XOR is lost, yet under 35%. `XorWatch` keeps the XOR
+fractions of the recent frames it accepted and flags a frame
+
+* far above their median (a spike: ``spike_factor`` times it), or
+* above ``high_factor`` times it for ``high_frames`` frames in a row (a slower slide).
+
+Frames above ``high_factor`` times the median do not enter it, so a slide cannot raise its own
+reference. A bar is never closer than ``min_margin`` (a fraction of the silhouette area) above
+the median: on clean renders the median is ~2% and a few pixels of difference would double it.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+MIN_REFERENCE_FRAMES = 3
+"""Accepted frames needed before the relative test speaks (after a start or a restart)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class WatchConfig:
+    spike_factor: float
+    high_factor: float
+    high_frames: int
+    window: int
+    min_margin: float
+
+    @property
+    def enabled(self) -> bool:
+        return self.spike_factor > 0 or self.high_frames > 0
+
+
+class XorWatch:
+    """The relative divergence test over a sequence of XOR fractions (see module docstring).
+
+    Per frame: `verdict` (does this XOR make the frame a divergence?), then `accept` for a
+    frame kept as tracked, or `restart` after a start or a recovery that found nothing better
+    (its XOR becomes the new reference)."""
+
+    def __init__(self, config: WatchConfig) -> None:
+        self.config = config
+        self.accepted: deque[float] = deque(maxlen=max(config.window, 1))
+        self.streak = 0  # frames in a row above the high bar, not accepted
+
+    def reference(self) -> float | None:
+        """Median XOR fraction of the accepted frames; None until there are enough."""
+        if len(self.accepted) < MIN_REFERENCE_FRAMES:
+            return None
+        values = sorted(self.accepted)
+        n = len(values)
+        return values[n // 2] if n % 2 else 0.5 * (values[n // 2 - 1] + values[n // 2])
+
+    def bar(self, factor: float) -> float | None:
+        """The XOR fraction above which a frame is `factor` times the reference."""
+        reference = self.reference()
+        if reference is None or factor <= 0:
+            return None
+        return max(factor * reference, reference + self.config.min_margin)
+
+    def verdict(self, xor_fraction: float) -> str:
+        """Why a frame of this XOR fraction is a divergence, or "" when it is not."""
+        cfg = self.config
+        reference = self.reference()
+        if reference is None:
+            return ""
+        spike = self.bar(cfg.spike_factor)
+        if spike is not None and xor_fraction > spike:
+            return (f"XOR {xor_fraction:.1%} of the silhouette, over {spike:.1%} "
+                    f"({cfg.spike_factor:g} x this subject's recent median {reference:.1%})")
+        high = self.bar(cfg.high_factor)
+        if (cfg.high_frames > 0 and high is not None and xor_fraction > high
+                and self.streak + 1 >= cfg.high_frames):  # fmt: skip
+            return (f"XOR {xor_fraction:.1%} of the silhouette, over {high:.1%} "
+                    f"({cfg.high_factor:g} x this subject's recent median {reference:.1%}) for "
+                    f"{self.streak + 1} frames in a row")
+        return ""
+
+    def accept(self, xor_fraction: float) -> None:
+        """A frame kept as tracked: its XOR enters the reference unless it is above the high
+        bar (then it counts towards the streak)."""
+        high = self.bar(self.config.high_factor)
+        if high is not None and xor_fraction > high:
+            self.streak += 1
+        else:
+            self.accepted.append(xor_fraction)
+            self.streak = 0
+
+    def restart(self, xor_fraction: float | None = None) -> None:
+        """Forget the reference (a new start; or what the model reaches now, when a recovery
+        found nothing better than a high XOR)."""
+        self.accepted.clear()
+        self.streak = 0
+        if xor_fraction is not None:
+            self.accepted.append(xor_fraction)
