@@ -1,10 +1,37 @@
-"""What the benchmark scripts share: running `mocap` as a user would, in its own process."""
+"""What the benchmark scripts share: running `mocap` as a user would, in its own process, and
+the bare pycolmap calls it is measured against."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
 import time
+
+# COLMAP's defaults through pycolmap, as a user would call them without `mocap` (one shared
+# camera, exhaustive matching, incremental mapping): `python -c BARE_COLMAP IMAGES OUT` writes
+# the largest model to OUT/best and prints its number of registered images.
+BARE_COLMAP = """
+import sys
+from pathlib import Path
+import pycolmap
+pycolmap.logging.minloglevel = 2
+images, out = Path(sys.argv[1]), Path(sys.argv[2])
+names = sorted(p.name for p in images.iterdir()
+               if p.suffix.lower() in {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"})
+db = out / "database.db"
+pycolmap.set_random_seed(0)
+pycolmap.extract_features(db, images, image_names=names, camera_mode=pycolmap.CameraMode.SINGLE,
+                          device=pycolmap.Device.cpu)
+pycolmap.match_exhaustive(db, device=pycolmap.Device.cpu)
+options = pycolmap.IncrementalPipelineOptions()
+options.random_seed = 0
+(out / "sparse").mkdir()
+models = pycolmap.incremental_mapping(db, images, out / "sparse", options=options)
+best = max(models, key=lambda i: models[i].num_reg_images())
+(out / "best").mkdir()
+models[best].write(out / "best")
+print(models[best].num_reg_images())
+"""
 
 
 def mocap(*args: str, echo: bool = True) -> float:

@@ -1,6 +1,7 @@
 """Wall time of `mocap sfm` against the bare pycolmap calls it wraps, on the same photos.
 
-Both run as fresh processes, alternating, so import time, disk cache and machine load hit
+Both run as fresh processes (the bare calls are `_cli.BARE_COLMAP`, which also writes the
+largest model, as `mocap sfm` does), alternating, so import time, disk cache and machine load hit
 them alike. Ours includes everything a user gets on top: image checks, atomic writes, run
 record, progress bars, and the Rerun recordings of every step.
 
@@ -20,30 +21,10 @@ import tempfile
 import time
 from pathlib import Path
 
+from _cli import BARE_COLMAP  # benchmarks/ is on sys.path when a script here runs
+
 ROOT = Path(__file__).resolve().parents[1]
 TEMPLE = ROOT.parent / "shared" / "data" / "temple_sparse_ring"
-
-# The same calls with the same settings as `mocap sfm` (one shared camera, SIMPLE_RADIAL,
-# exhaustive matching, incremental mapping whose last stage is a global bundle adjustment).
-BARE = """
-import sys
-from pathlib import Path
-import pycolmap
-pycolmap.logging.minloglevel = 2
-images, out = Path(sys.argv[1]), Path(sys.argv[2])
-names = sorted(p.name for p in images.iterdir()
-               if p.suffix.lower() in {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"})
-db = out / "database.db"
-pycolmap.set_random_seed(0)
-pycolmap.extract_features(db, images, image_names=names, camera_mode=pycolmap.CameraMode.SINGLE,
-                          device=pycolmap.Device.cpu)
-pycolmap.match_exhaustive(db, device=pycolmap.Device.cpu)
-options = pycolmap.IncrementalPipelineOptions()
-options.random_seed = 0
-(out / "sparse").mkdir()
-models = pycolmap.incremental_mapping(db, images, out / "sparse", options=options)
-print(max(m.num_reg_images() for m in models.values()))
-"""
 
 
 def _timed(command: list[str]) -> float:
@@ -77,7 +58,7 @@ def main() -> None:
             out.mkdir()
             ours.append(_timed([sys.executable, "-m", "recon.cli", "sfm", str(ws),
                                 "--images", str(images)]))
-            bare.append(_timed([sys.executable, "-c", BARE, str(images), str(out)]))
+            bare.append(_timed([sys.executable, "-c", BARE_COLMAP, str(images), str(out)]))
     print(f"images: {images}")
     for label, times in (("mocap sfm", ours), ("bare pycolmap", bare)):
         print(f"{label:<14} min {min(times):.2f} s  median {statistics.median(times):.2f} s  "

@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 
 import pycolmap
-from _cli import mocap  # benchmarks/ is on sys.path when a script here runs
+from _cli import BARE_COLMAP, mocap  # benchmarks/ is on sys.path when a script here runs
 
 from recon.evaluation.truth import load_ground_truth
 
@@ -40,34 +40,11 @@ SETS = {
     "fountain": (DATA / "fountain_p11" / "images", DATA / "fountain_p11" / "images" / "K.txt"),
 }
 
-# COLMAP's defaults, as sfm_overhead.py runs them; prints the largest model's folder.
-BARE = """
-import sys
-from pathlib import Path
-import pycolmap
-pycolmap.logging.minloglevel = 2
-images, out = Path(sys.argv[1]), Path(sys.argv[2])
-names = sorted(p.name for p in images.iterdir()
-               if p.suffix.lower() in {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"})
-db = out / "database.db"
-pycolmap.set_random_seed(0)
-pycolmap.extract_features(db, images, image_names=names, camera_mode=pycolmap.CameraMode.SINGLE,
-                          device=pycolmap.Device.cpu)
-pycolmap.match_exhaustive(db, device=pycolmap.Device.cpu)
-options = pycolmap.IncrementalPipelineOptions()
-options.random_seed = 0
-(out / "sparse").mkdir()
-models = pycolmap.incremental_mapping(db, images, out / "sparse", options=options)
-best = max(models, key=lambda i: models[i].num_reg_images())
-(out / "best").mkdir()
-models[best].write(out / "best")
-"""
-
 
 def _bare(images: Path, out: Path) -> tuple[Path, float]:
     out.mkdir(parents=True)
     start = time.perf_counter()
-    result = subprocess.run([sys.executable, "-c", BARE, str(images), str(out)],
+    result = subprocess.run([sys.executable, "-c", BARE_COLMAP, str(images), str(out)],
                             capture_output=True, text=True)  # fmt: skip
     if result.returncode != 0:
         sys.exit(f"bare pycolmap failed:\n{result.stderr}")
