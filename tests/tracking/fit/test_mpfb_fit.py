@@ -221,6 +221,52 @@ def test_arms_overhead_239_is_right_or_refused_near_the_truth():
     assert errors.mean() < 0.030 and np.median(errors) < 0.015, errors  # right or refused
 
 
+@pytest.mark.slow
+@pytest.mark.shared_data
+def test_a_seated_body_is_fitted_from_the_roots_ranked_with_limbs():
+    """Sit-stand frame 860, seated on a stool (knees bent 119-143 degrees, thighs abducted,
+    the trunk leaning 40 degrees), the cloud of `benchmarks/body_fit.py --clips fresh`: the
+    trunk alone ranked its right roots 124th of 320, and every searched orientation was
+    refused (reported 314 mm off). Ranked with the limbs (`_LIMB_RANKED`), it is accepted
+    (session 20: 2.6 mm)."""
+    pose = _real_pose("cmu_sit_stand.bvh", 860)
+    points, _ = body_cloud(MISMATCHED, pose, np.random.default_rng(1005))
+    result = fit_body(points, FitConfig(body="mpfb"))
+    fitted = np.array([result.joints[n] for n in NODE_NAMES])
+    errors = np.linalg.norm(fitted - MISMATCHED.joints(pose), axis=1)
+    assert result.success, result.message
+    assert errors.max() < 0.030, errors
+
+
+def test_limbs_set_to_their_best_candidates_rank_a_root():
+    """`with_limbs`: a trunk fit whose limbs hang straight is scored with each limb on its
+    best grid candidate. On a seated cloud (not the fit's own model), from the true root: the
+    cost falls, and both thighs come forward, as seated."""
+    from tracking.body.model import PARAM_INDEX
+    from tracking.fit.body_fit import _bounds, _Problem, _surface, with_limbs
+
+    pose = walking_poses(1, 30.0, MISMATCHED.shape)[0]
+    params = pose.params.copy()
+    for side, sign in (("l", 1.0), ("r", -1.0)):
+        params[PARAM_INDEX[f"{side}_hip_rx"]] = np.deg2rad(-90.0)
+        params[PARAM_INDEX[f"{side}_hip_rz"]] = np.deg2rad(10.0) * sign
+        params[PARAM_INDEX[f"{side}_knee_flex"]] = np.deg2rad(90.0)
+    seated = Pose(params)
+    points, _ = body_cloud(MISMATCHED, seated, np.random.default_rng(3))
+    points = points[np.random.default_rng(0).choice(len(points), 400, replace=False)]
+    height = MISMATCHED.shape.height
+    problem = _Problem(_surface(), _bounds(height), 0.03 * height)
+    x = np.concatenate([pose.params, [height, 1.0]])  # the true root, the walking limbs
+    for limb_param in ("hip_rx", "hip_rz", "knee_flex", "shoulder_rx", "elbow_flex"):
+        for side in "lr":
+            x[PARAM_INDEX[f"{side}_{limb_param}"]] = 0.0
+    before = problem.cost(x, points, np.arange(0, problem.n_samples, 4))
+    cost, ranked = with_limbs(problem, x, points)
+    assert cost < 0.8 * before, (cost, before)
+    for side in "lr":
+        assert np.rad2deg(ranked[PARAM_INDEX[f"{side}_hip_rx"]]) < -55.0, side  # -60 or -90
+
+
 def test_a_limb_fitted_elsewhere_is_found_again_by_the_repair():
     """`repair_limbs`, the second chance of a fit refused for a limb: from MakeHuman's average
     subject (not the cloud's) with the left arm held out sideways, every candidate of that
