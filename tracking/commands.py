@@ -114,6 +114,12 @@ class TrackCommand:
             print(f"warning: the subject was lost in {len(summary['lost'])} of "
                   f"{summary['frames']} frames (see the events above): tracks/pose.json has no "
                   "pose for them and motion.bvh repeats the last tracked one", file=sys.stderr)
+        if summary.get("absent"):  # older runs lack it
+            print(f"absent     frames {summary['absent']} (no silhouette in any camera: the "
+                  "subject is out of view; no pose)")
+            print(f"warning: no subject in view in {len(summary['absent'])} of "
+                  f"{summary['frames']} frames: tracks/pose.json has no pose for them",
+                  file=sys.stderr)
         if summary.get("recovered"):  # older runs lack it
             print(f"recovered  frames {summary['recovered']} (found again by the start search)")
         if summary.get("diverged"):

@@ -9,10 +9,11 @@ or `mocap silhouettes`) and writes, each atomically:
 * ``tracks/pose.json``: ``{"frame_rate", "shape": {BodyShape}, "body": {"name": the body
   model plugin, and what rebuilds its subject, e.g. mpfb's "macro"}, "world_from_upright":
   (3, 3), "frames": [{"frame", "params" (26, POSE_LAYOUT order) or null when lost, "energy_px",
-  "xor_fraction", "event", "status"}], "lost", "diverged", "recovered": [frame, ...]}``: a
-  frame's status is one of `tracking.track.tracker.STATUSES` (init, tracked, recovered,
-  diverged: a pose kept but not trusted, lost: no pose), and the three lists name the frames
-  of the last three (`status_lists`);
+  "xor_fraction", "event", "status"}], "lost", "diverged", "recovered", "absent": [frame, ...]}``:
+  a frame's status is one of `tracking.track.tracker.STATUSES` (init, tracked, recovered,
+  diverged: a pose kept but not trusted, lost: no pose, absent: no pose, no camera sees a
+  subject), and the lists name the frames of the last four (`status_lists`). Tracking
+  starts at the first frame with a silhouette in some camera; frames before it are absent;
 * ``tracks/motion.bvh``: the tracked frames on the body skeleton (`tracking.body.motion`); a
   BVH has no gaps, so a lost frame repeats the last tracked pose (pose.json says which);
 * ``tracks/subject.glb``: the subject's mesh (the body model's full resolution) skinned on
@@ -22,9 +23,9 @@ or `mocap silhouettes`) and writes, each atomically:
   world frame, metres;
 * ``logs/track.rrd``: silhouettes and the XOR overlay per camera over the video frame
   (`TrackStepConfig.logged_images` of them), the body mesh and skeleton, the energy per
-  frame, and each frame's status (``track/status``: a text log, lost and diverged frames as
-  warnings; ``track/status_index``: its index in `STATUSES`), on the ``frame`` and ``time``
-  timelines.
+  frame, and each frame's status (``track/status``: a text log, lost, diverged and absent
+  frames as warnings; ``track/status_index``: its index in `STATUSES`), on the ``frame`` and
+  ``time`` timelines.
 
 The poses, the BVH and the recording are in the *upright frame* of the camera rig
 (`tracking.rig.cameras.upright_frame`): Y up, as the body model, BVH and OpenSim expect, and the
@@ -175,7 +176,13 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
             raise UserError(_all_foreground_message(ws, cameras, frames))
         return masks
 
-    world_from_upright = _upright_frame(cameras, masks_of(frames[0]))
+    # The start: the first frame where some camera has a silhouette (the subject may enter
+    # the view after the recording began); the frames before it are absent.
+    first = next((i for i, f in enumerate(frames) if any(m.any() for m in masks_of(f))), None)
+    if first is None:
+        raise UserError(f"{ws.silhouettes_dir}: no silhouette in any camera in any of frames "
+                        f"{frames[0]}-{frames[-1]}: nobody to track")
+    world_from_upright = _upright_frame(cameras, masks_of(frames[first]))
     if given is not None:
         assert init_pose is not None  # a file without a pose was refused above
         init_pose = pose_in_frame(init_pose, world_from_upright.T @ given.world_from_upright)
@@ -189,18 +196,19 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         0, len(frames) - 1, min(step.logged_images, len(frames))).round().astype(int))}
     with Timer() as timer, _Recorder(ws, upright, frame_rate, logged) as recorder:
         if init_model is None and config.shape_frames > 1:
-            shape_frames = frames[:config.shape_frames]
+            shape_frames = frames[first:first + config.shape_frames]
             bar = progress_bar(len(shape_frames), "shape", "frame", enabled=progress)
             try:
                 init_pose = tracker.calibrate_shape(
                     [masks_of(f) for f in shape_frames], progress=bar.update)
             except TrackingLost as exc:
-                raise UserError(f"cannot start tracking at frame {frames[0]}: {exc}") from None
+                raise UserError(f"cannot start tracking at frame {frames[first]}: {exc}"
+                                ) from None
             bar.close()
         bar = progress_bar(len(frames), "track", "frame", enabled=progress)
         for index, frame in enumerate(frames):
             masks = masks_of(frame)
-            result = tracker.track(frame, masks, init=init_pose if index == 0 else None)
+            result = tracker.track(frame, masks, init=init_pose if index == first else None)
             results.append(result)
             recorder.frame(tracker, result, masks)
             bar.set_postfix_str(f"XOR {result.xor_fraction:.0%} {result.event}"[:40])
@@ -214,7 +222,8 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
     tracked = [r for r in results if r.pose is not None]
     summary = {
         "frames": len(results), "tracked": len(tracked),
-        "lost": [r.frame for r in results if r.pose is None],
+        "lost": [r.frame for r in results if r.status == "lost"],
+        "absent": [r.frame for r in results if r.status == "absent"],
         "diverged": [r.frame for r in results if r.status == "diverged"],
         "recovered": [r.frame for r in results if r.status == "recovered"],
         "events": {str(r.frame): r.event for r in results if r.event},
@@ -285,10 +294,10 @@ def _upright_frame(cameras: Sequence[Any], masks: Sequence[np.ndarray]) -> np.nd
 def status_lists(results: Sequence[FrameResult]) -> dict[str, list[int]]:
     """pose.json's summary of the frames' `FrameResult.status`: the frames lost (no pose),
     diverged (a divergence that the start search found nothing better for: the best pose is
-    kept, but not trusted) and recovered (found again by the start search after a divergence
-    or after lost frames)."""
+    kept, but not trusted), recovered (found again by the start search after a divergence
+    or after lost or absent frames) and absent (no pose: no camera has a silhouette)."""
     return {name: [r.frame for r in results if r.status == name]
-            for name in ("lost", "diverged", "recovered")}
+            for name in ("lost", "diverged", "recovered", "absent")}
 
 
 def _write_outputs(outputs: dict[str, Path], results: list[FrameResult], model: TrackedModel,
@@ -417,9 +426,9 @@ class _Recorder:
                 if index == result.frame:
                     r.log_frame_image(self.rec, f"world/cameras/{r.entity_name(name)}/image",
                                       image, result.frame, t)  # fmt: skip
-        # The frame's status as a text log (lost and diverged frames as warnings) and as a
-        # scalar (its index in STATUSES) on the frame timeline.
-        level = "WARN" if result.status in ("lost", "diverged") else "INFO"
+        # The frame's status as a text log (lost, diverged and absent frames as warnings) and
+        # as a scalar (its index in STATUSES) on the frame timeline.
+        level = "WARN" if result.status in ("lost", "diverged", "absent") else "INFO"
         r.log_frame_text(self.rec, "track/status", f"{result.status}: {result.event}"
                          if result.event else result.status, level, result.frame, t)
         r.log_frame_scalar(self.rec, "track/status_index", STATUSES.index(result.status),

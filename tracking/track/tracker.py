@@ -51,7 +51,9 @@ grids over their whole range) and from the visual hull (`initialise`), and the c
 lowest XOR, the tracked pose included, is kept: the frame is "recovered" when the search found
 a pose that is no divergence, "diverged" (its best pose kept, not trusted; its XOR the
 reference from then on) when only the relative tests still fail, and "lost" (no joints; never
-NaN) when the absolute one does. `FrameResult.status` says which (`STATUSES`).
+NaN) when the absolute one does. `FrameResult.status` says which (`STATUSES`). A frame where
+no camera has a silhouette is "absent" (the subject left the view): no pose and no search; the
+next frame with silhouettes starts afresh from the visual hull and is "recovered".
 
 The search ranges scale with the frame interval (`frame_interval_s`, seconds), not with the
 frame index: a limb grid's half-range is `range_gain` times the change over the two preceding
@@ -346,7 +348,8 @@ class TrackConfig:
         return np.array([i for i in range(N_POSE_PARAMS) if i not in held])
 
 
-STATUSES = ("init", "tracked", "recovered", "diverged", "lost")
+STATUSES = ("init", "tracked", "recovered", "diverged", "lost", "absent")
+"""A frame's `FrameResult.status`; new ones go at the end (the recording logs the index)."""
 
 
 @dataclass(frozen=True)
@@ -359,11 +362,13 @@ class FrameResult:
     silhouette_area: float
     evaluations: int
     seconds: float
-    event: str = ""  # "init ...", "recovered ...", "diverged: ...", "lost: ..." or ""
+    event: str = ""  # "init ...", "recovered ...", "diverged: ...", "lost: ...", "absent: ..."
     status: str = "tracked"
     """One of `STATUSES`: "init" (a start), "tracked", "recovered" (a divergence, or the first
-    frame after lost ones, found again by the start search), "diverged" (a divergence the
-    search found nothing better for: the best pose is kept, not trusted) or "lost" (no pose)."""
+    frame after lost or absent ones, found again by the start search), "diverged" (a
+    divergence the search found nothing better for: the best pose is kept, not trusted),
+    "lost" (no pose) or "absent" (no pose: no camera has a silhouette, the subject is out of
+    view)."""
 
     @property
     def xor_fraction(self) -> float:
@@ -476,6 +481,8 @@ class SilhouetteTracker:
             high_frames=cfg.high_xor_frames, window=cfg.xor_window, min_margin=cfg.xor_margin))
         self._last_good: tuple[int, np.ndarray] | None = None  # (frame, params) last trusted
         self._lost_since: int | None = None  # first frame of the current run of lost frames
+        self._gap_statuses: set[str] = set()  # "lost", "absent": what that run's frames were
+        self._tracked_any = False  # a frame has had a pose since the start (or shape pass)
         # (the frame's energy, level, its outline refiner): built once per frame and level
         self._refiner: tuple[SilhouetteEnergy, int, ContourRefiner] | None = None
         self.evaluations = 0
@@ -658,6 +665,7 @@ class SilhouetteTracker:
         poses = self._refine_shape([m for m, _ in picked], [p for _, p in picked])
         # Tracking starts afresh from the first frame: nothing of the pass is a reference.
         self.history, self._last_good, self._lost_since = [], None, None
+        self._gap_statuses, self._tracked_any = set(), False
         self.watch.restart()
         return Pose(self._refine_all(self._energy(picked[0][0]), poses[0].params.copy(),
                                      init=True))
@@ -870,6 +878,11 @@ class SilhouetteTracker:
         self.evaluations = 0
         area = _known_area([np.asarray(m, bool) for m in masks], self.known)
         empty = [c.name for c, m in zip(self.cameras, masks, strict=True) if not m.any()]
+        if len(empty) == len(masks):
+            # Nobody in view: the subject left (issue 20). No search; the first frame with
+            # silhouettes again starts afresh from the visual hull (and is "recovered").
+            return self._lost(frame, float("nan"), area, start, "no silhouette in any camera "
+                              "(the subject is out of view)", status="absent")
         # Foreground in every pixel: the background model failed, and the silhouette has no
         # outline to fit (its distance field is infinite).
         full = [c.name for c, m in zip(self.cameras, masks, strict=True) if m.all()]
@@ -928,7 +941,9 @@ class SilhouetteTracker:
                     event = f"recovered from {found} (XOR {e / area:.1%}): {why}"
             elif status == "init" and self._lost_since is not None:
                 status = "recovered"
-                event = f"recovered after frames {self._lost_since}-{frame - 1} were lost: {event}"
+                gap = " or ".join(sorted(self._gap_statuses))
+                event = (f"recovered after frames {self._lost_since}-{frame - 1} were {gap}: "
+                         f"{event}")
         except TrackingLost as exc:
             return self._lost(frame, float("nan"), area, start, str(exc))
         if status in ("init", "diverged") or self._lost_since is not None:
@@ -938,21 +953,24 @@ class SilhouetteTracker:
             self.watch.accept(e / area)
         if status != "diverged" and self.watch.streak == 0:
             self._last_good = (frame, x.copy())
-        self._lost_since = None
+        self._lost_since, self._gap_statuses, self._tracked_any = None, set(), True
         self.history = [*self.history[-1:], x]
         return FrameResult(frame, Pose(x), e, area, self.evaluations,
                            time.perf_counter() - start, event, status)  # fmt: skip
 
-    def _lost(self, frame: int, energy: float, area: float, start: float, why: str
-              ) -> FrameResult:  # fmt: skip
-        """A lost frame: no pose; the next frame starts afresh (and is "recovered")."""
+    def _lost(self, frame: int, energy: float, area: float, start: float, why: str,
+              status: str = "lost") -> FrameResult:  # fmt: skip
+        """A frame without a pose (`status` "lost" or "absent"); the next frame starts afresh
+        (and is "recovered")."""
         self.history = []
-        if self._lost_since is None:
+        if self._lost_since is None and self._tracked_any:
+            # (Frames before the first start are no gap: that start is "init".)
             self._lost_since = frame
+        self._gap_statuses.add(status)
         if np.isfinite(energy) and "XOR" not in why:
             why = f"XOR {energy / area:.0%} of the silhouette area; {why}"
         return FrameResult(frame, None, energy, area, self.evaluations,
-                           time.perf_counter() - start, f"lost: {why}", "lost")  # fmt: skip
+                           time.perf_counter() - start, f"{status}: {why}", status)  # fmt: skip
 
     def _recover(self, masks: Sequence[np.ndarray], energy: SilhouetteEnergy, x: np.ndarray,
                  e: float) -> tuple[np.ndarray, float, str | None]:  # fmt: skip
