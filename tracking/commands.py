@@ -120,6 +120,12 @@ class TrackCommand:
             print(f"warning: no subject in view in {len(summary['absent'])} of "
                   f"{summary['frames']} frames: tracks/pose.json has no pose for them",
                   file=sys.stderr)
+        if summary.get("two_subjects"):  # older runs lack it
+            print(f"two subjects frames {summary['two_subjects']} (two or more subjects in "
+                  "view: not tracked; no pose)")
+            print(f"warning: two or more subjects in view in {len(summary['two_subjects'])} of "
+                  f"{summary['frames']} frames: tracks/pose.json has no pose for them",
+                  file=sys.stderr)
         if summary.get("recovered"):  # older runs lack it
             print(f"recovered  frames {summary['recovered']} (found again by the start search)")
         if summary.get("diverged"):

@@ -251,6 +251,57 @@ def visual_hull(cameras: Sequence[Camera], masks: Sequence[np.ndarray], *, size_
     return points, n, occupied
 
 
+@dataclass(frozen=True)
+class HullPart:
+    """A connected part of a visual hull (26-neighbours): its volume (m^3), its extent along
+    the rig's up (m; along its longest side when the rig gives no up) and its centre (3,)."""
+
+    volume_m3: float
+    height_m: float
+    centre: np.ndarray
+
+
+SUBJECT_MIN_HEIGHT_M = 0.8
+"""A hull part this tall (along up) and ...  """
+SUBJECT_MIN_VOLUME_M3 = 0.02
+"""... this large is of human size: a standing or walking adult's hull is 1.5-1.9 m tall and
+0.07-0.2 m^3 (fatter than the body with few views); a child of 1 m or a crouching adult
+passes too. A hand or a foot cut off by a view (a few litres) and the slivers that few views
+leave around one body do not."""
+
+
+def hull_parts(cameras: Sequence[Camera], masks: Sequence[np.ndarray], *, size_m: float,
+               voxel_m: float, up: np.ndarray | None = None,
+               unknown: Sequence[np.ndarray | None] | None = None) -> list[HullPart]:
+    """The connected parts of the visual hull of ``masks`` (:func:`visual_hull` on a cube of
+    side ``size_m``), largest first. One subject makes one part (its silhouettes are connected
+    in every view); two subjects apart make two or more (each, and the ghosts where the rays
+    of the one meet those of the other). Empty when fewer than two views have a silhouette."""
+    from scipy import ndimage
+
+    if sum(bool(np.asarray(m).any()) for m in masks) < 2:
+        return []
+    points, n, occupied = visual_hull(cameras, masks, size_m=size_m, voxel_m=voxel_m,
+                                      unknown=unknown)
+    labels, count = ndimage.label(occupied.reshape(n, n, n), np.ones((3, 3, 3), bool))
+    labels = labels.ravel()
+    parts = []
+    for label in range(1, count + 1):
+        inside = points[labels == label]
+        if up is not None:
+            height = float(np.ptp(inside @ np.asarray(up, float))) + voxel_m
+        else:
+            height = float(np.ptp(inside, axis=0).max()) + voxel_m
+        parts.append(HullPart(len(inside) * voxel_m**3, height, inside.mean(axis=0)))
+    return sorted(parts, key=lambda p: -p.volume_m3)
+
+
+def subject_sized(parts: Sequence[HullPart]) -> list[HullPart]:
+    """The parts of human size (`SUBJECT_MIN_HEIGHT_M`, `SUBJECT_MIN_VOLUME_M3`)."""
+    return [p for p in parts
+            if p.height_m >= SUBJECT_MIN_HEIGHT_M and p.volume_m3 >= SUBJECT_MIN_VOLUME_M3]
+
+
 def surface_voxels(occupied: np.ndarray, n: int) -> np.ndarray:
     """(n**3,) bool: occupied voxels with at least one empty 6-neighbour."""
     occupied = occupied.reshape(n, n, n)

@@ -12,8 +12,10 @@ or `mocap silhouettes`) and writes, each atomically:
   "xor_fraction", "event", "status"}], "lost", "diverged", "recovered", "absent": [frame, ...]}``:
   a frame's status is one of `tracking.track.tracker.STATUSES` (init, tracked, recovered,
   diverged: a pose kept but not trusted, lost: no pose, absent: no pose, no camera sees a
-  subject), and the lists name the frames of the last four (`status_lists`). Tracking
-  starts at the first frame with a silhouette in some camera; frames before it are absent;
+  subject, two-subjects: no pose, two subjects or more in view), and the lists name the
+  frames of the last five (`status_lists`; "two_subjects"). Tracking starts at the first
+  frame with a silhouette in some camera and one subject in view; frames before it are
+  absent or two-subjects;
 * ``tracks/motion.bvh``: the tracked frames on the body skeleton (`tracking.body.motion`); a
   BVH has no gaps, so a lost frame repeats the last tracked pose (pose.json says which);
 * ``tracks/subject.glb``: the subject's mesh (the body model's full resolution) skinned on
@@ -23,9 +25,9 @@ or `mocap silhouettes`) and writes, each atomically:
   world frame, metres;
 * ``logs/track.rrd``: silhouettes and the XOR overlay per camera over the video frame
   (`TrackStepConfig.logged_images` of them), the body mesh and skeleton, the energy per
-  frame, and each frame's status (``track/status``: a text log, lost, diverged and absent
-  frames as warnings; ``track/status_index``: its index in `STATUSES`), on the ``frame`` and
-  ``time`` timelines.
+  frame, and each frame's status (``track/status``: a text log, lost, diverged, absent and
+  two-subjects frames as warnings; ``track/status_index``: its index in `STATUSES`), on the
+  ``frame`` and ``time`` timelines.
 
 The poses, the BVH and the recording are in the *upright frame* of the camera rig
 (`tracking.rig.cameras.upright_frame`): Y up, as the body model, BVH and OpenSim expect, and the
@@ -62,6 +64,7 @@ from tracking.track.tracker import (
     SilhouetteTracker,
     TrackConfig,
     TrackingLost,
+    subjects_in_view,
 )
 
 
@@ -177,18 +180,33 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         return masks
 
     # The start: the first frame where some camera has a silhouette (the subject may enter
-    # the view after the recording began); the frames before it are absent.
-    first = next((i for i, f in enumerate(frames) if any(m.any() for m in masks_of(f))), None)
+    # the view after the recording began) of one subject; the frames before it are absent or
+    # show two subjects, and are refused as such.
+    first, crowded, unknown = None, [], unknown_pixels(ws, cameras)
+    for i, f in enumerate(frames):
+        masks = masks_of(f)
+        if not any(m.any() for m in masks):
+            continue
+        if len(subjects_in_view(cameras, masks, config, unknown)) >= 2:
+            crowded.append(f)
+            continue
+        first = i
+        break
     if first is None:
+        from tracking.silhouettes.step import _ranges
+
         raise UserError(f"{ws.silhouettes_dir}: no silhouette in any camera in any of frames "
-                        f"{frames[0]}-{frames[-1]}: nobody to track")
+                        f"{frames[0]}-{frames[-1]}: nobody to track" if not crowded else
+                        f"{ws.silhouettes_dir}: no frame shows one subject: two or more "
+                        f"subjects are in view in frame(s) {_ranges(crowded, 1)} and nobody "
+                        "in the others; track frames with one subject (--first/--last)")
     world_from_upright = _upright_frame(cameras, masks_of(frames[first]))
     if given is not None:
         assert init_pose is not None  # a file without a pose was refused above
         init_pose = pose_in_frame(init_pose, world_from_upright.T @ given.world_from_upright)
     upright = [c.in_frame(world_from_upright) for c in cameras]
     tracker = SilhouetteTracker(upright, config, model=init_model,
-                                unknown=unknown_pixels(ws, cameras),
+                                unknown=unknown,
                                 frame_interval_s=1.0 / frame_rate)
     results: list[FrameResult] = []
 
@@ -224,6 +242,7 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         "frames": len(results), "tracked": len(tracked),
         "lost": [r.frame for r in results if r.status == "lost"],
         "absent": [r.frame for r in results if r.status == "absent"],
+        "two_subjects": [r.frame for r in results if r.status == "two-subjects"],
         "diverged": [r.frame for r in results if r.status == "diverged"],
         "recovered": [r.frame for r in results if r.status == "recovered"],
         "events": {str(r.frame): r.event for r in results if r.event},
@@ -295,9 +314,10 @@ def status_lists(results: Sequence[FrameResult]) -> dict[str, list[int]]:
     """pose.json's summary of the frames' `FrameResult.status`: the frames lost (no pose),
     diverged (a divergence that the start search found nothing better for: the best pose is
     kept, but not trusted), recovered (found again by the start search after a divergence
-    or after lost or absent frames) and absent (no pose: no camera has a silhouette)."""
-    return {name: [r.frame for r in results if r.status == name]
-            for name in ("lost", "diverged", "recovered", "absent")}
+    or after frames without a pose), absent (no pose: no camera has a silhouette) and
+    two_subjects (no pose: two subjects or more in view, status "two-subjects")."""
+    return {name.replace("-", "_"): [r.frame for r in results if r.status == name]
+            for name in ("lost", "diverged", "recovered", "absent", "two-subjects")}
 
 
 def _write_outputs(outputs: dict[str, Path], results: list[FrameResult], model: TrackedModel,
@@ -428,7 +448,8 @@ class _Recorder:
                                       image, result.frame, t)  # fmt: skip
         # The frame's status as a text log (lost, diverged and absent frames as warnings) and
         # as a scalar (its index in STATUSES) on the frame timeline.
-        level = "WARN" if result.status in ("lost", "diverged", "absent") else "INFO"
+        level = "WARN" if result.status in ("lost", "diverged", "absent",
+                                            "two-subjects") else "INFO"
         r.log_frame_text(self.rec, "track/status", f"{result.status}: {result.event}"
                          if result.event else result.status, level, result.frame, t)
         r.log_frame_scalar(self.rec, "track/status_index", STATUSES.index(result.status),

@@ -53,7 +53,12 @@ a pose that is no divergence, "diverged" (its best pose kept, not trusted; its X
 reference from then on) when only the relative tests still fail, and "lost" (no joints; never
 NaN) when the absolute one does. `FrameResult.status` says which (`STATUSES`). A frame where
 no camera has a silhouette is "absent" (the subject left the view): no pose and no search; the
-next frame with silhouettes starts afresh from the visual hull and is "recovered".
+next frame with silhouettes starts afresh from the visual hull and is "recovered". A frame
+whose visual hull has two separate parts of human size or more (`subjects_in_view`: two
+subjects apart, both in every camera's view) is "two-subjects": no pose, rather than a fit to
+the merged blob. It is looked for where a second subject shows: at a start from the hull, and
+on a divergence before the start search (the other subject's silhouettes are unexplained, so
+the XOR jumps).
 
 The search ranges scale with the frame interval (`frame_interval_s`, seconds), not with the
 frame index: a limb grid's half-range is `range_gain` times the change over the two preceding
@@ -91,7 +96,15 @@ from tracking.body.model import (
 )
 from tracking.body.motion import zxy_twin
 from tracking.rig.cameras import rig_up
-from tracking.silhouettes.hull import check_voxel_grid, surface_voxels, visual_hull
+from tracking.silhouettes.hull import (
+    HullPart,
+    check_voxel_grid,
+    hull_parts,
+    rays_meeting_point,
+    subject_sized,
+    surface_voxels,
+    visual_hull,
+)
 from tracking.track.contour import ContourConfig, ContourRefiner, refine_shape
 from tracking.track.divergence import WatchConfig, XorWatch
 from tracking.track.energy import SilhouetteEnergy, counted
@@ -348,7 +361,7 @@ class TrackConfig:
         return np.array([i for i in range(N_POSE_PARAMS) if i not in held])
 
 
-STATUSES = ("init", "tracked", "recovered", "diverged", "lost", "absent")
+STATUSES = ("init", "tracked", "recovered", "diverged", "lost", "absent", "two-subjects")
 """A frame's `FrameResult.status`; new ones go at the end (the recording logs the index)."""
 
 
@@ -367,8 +380,9 @@ class FrameResult:
     """One of `STATUSES`: "init" (a start), "tracked", "recovered" (a divergence, or the first
     frame after lost or absent ones, found again by the start search), "diverged" (a
     divergence the search found nothing better for: the best pose is kept, not trusted),
-    "lost" (no pose) or "absent" (no pose: no camera has a silhouette, the subject is out of
-    view)."""
+    "lost" (no pose), "absent" (no pose: no camera has a silhouette, the subject is out of
+    view) or "two-subjects" (no pose: the visual hull has two or more separate parts of human
+    size, `SilhouetteTracker.subjects_in_view`)."""
 
     @property
     def xor_fraction(self) -> float:
@@ -481,7 +495,7 @@ class SilhouetteTracker:
             high_frames=cfg.high_xor_frames, window=cfg.xor_window, min_margin=cfg.xor_margin))
         self._last_good: tuple[int, np.ndarray] | None = None  # (frame, params) last trusted
         self._lost_since: int | None = None  # first frame of the current run of lost frames
-        self._gap_statuses: set[str] = set()  # "lost", "absent": what that run's frames were
+        self._gap_statuses: set[str] = set()  # statuses of that run's frames
         self._tracked_any = False  # a frame has had a pose since the start (or shape pass)
         # (the frame's energy, level, its outline refiner): built once per frame and level
         self._refiner: tuple[SilhouetteEnergy, int, ContourRefiner] | None = None
@@ -508,6 +522,25 @@ class SilhouetteTracker:
                                           voxel_m=self.config.voxel_m, unknown=self.unknown)
         return points[surface_voxels(occupied, n)]
 
+    def subjects_in_view(self, masks: Sequence[np.ndarray]) -> list[HullPart]:
+        """The parts of human size of the visual hull of ``masks`` (`hull_parts`,
+        `subject_sized`), largest first: one for one subject in view, two or more for two
+        subjects apart (the silhouettes of two subjects that touch make one part). Carved
+        on a cube twice `hull_size_m` wide at twice `voxel_m` (0.1 s at 320x240), so that a
+        second subject beside the first is in it; only the space every camera sees counts."""
+        return subjects_in_view(self.cameras, masks, self.config, self.unknown)
+
+    def _one_subject(self, masks: Sequence[np.ndarray]) -> None:
+        """`SubjectsInView` when the silhouettes show two subjects or more."""
+        parts = self.subjects_in_view(masks)
+        if len(parts) >= 2:
+            heights = ", ".join(f"{p.height_m:.2f}" for p in parts)
+            apart = float(np.linalg.norm(parts[0].centre - parts[1].centre))
+            raise SubjectsInView(
+                f"{len(parts)} subjects in view: the visual hull has {len(parts)} separate "
+                f"parts of human size ({heights} m tall; the two largest {apart:.2f} m apart), "
+                "so the frame is not tracked")
+
     def initialise(self, masks: Sequence[np.ndarray], init: Pose | None = None) -> tuple[Pose, str]:
         """The first pose: `init` if given, else the best of a body fitted to the visual hull and
         upright bodies at `init_headings` headings, each refined against the silhouettes. Sets
@@ -526,6 +559,7 @@ class SilhouetteTracker:
         """`initialise` without a given pose."""
         from tracking.fit.body_fit import FitConfig, fit_body
 
+        self._one_subject(masks)  # a fit to two subjects' hull would merge them
         points = self.visual_hull_points(masks)
         if len(points) < 100:
             raise TrackingLost("the silhouettes do not intersect in a visual hull")
@@ -909,6 +943,8 @@ class SilhouetteTracker:
                     # Another pass from the result, with the ranges of a small change.
                     x = self._refine_all(energy, x, change=np.abs(x - predicted) / 2)
             e = energy(Pose(x))
+            if event and e > self.config.max_xor_fraction * area:
+                self._one_subject(masks)  # a given start, and a second subject beside it
             if event:
                 # What the silhouettes allow: real masks have holes and ghosts, so the first
                 # frame's XOR sets the bar (at least `max_xor_fraction`) for the divergence test.
@@ -924,7 +960,10 @@ class SilhouetteTracker:
                 elif not self._starting:  # the shape pass's model is not the subject's yet
                     why = self.watch.verdict(e / area)
             if why:
-                # Divergence: the start search again, from the last good pose and the hull.
+                # A second subject makes a divergence (its silhouettes are unexplained): say
+                # so, and track no merged blob. Else the start search again, from the last
+                # good pose and the hull.
+                self._one_subject(masks)
                 x, e, found = self._recover(masks, energy, x, e)
                 if e > limit:
                     return self._lost(frame, e, area, start, f"{why}; the start search found "
@@ -941,11 +980,11 @@ class SilhouetteTracker:
                     event = f"recovered from {found} (XOR {e / area:.1%}): {why}"
             elif status == "init" and self._lost_since is not None:
                 status = "recovered"
-                gap = " or ".join(sorted(self._gap_statuses))
+                gap = " or ".join(_GAP_WORDS[s] for s in sorted(self._gap_statuses))
                 event = (f"recovered after frames {self._lost_since}-{frame - 1} were {gap}: "
                          f"{event}")
         except TrackingLost as exc:
-            return self._lost(frame, float("nan"), area, start, str(exc))
+            return self._lost(frame, float("nan"), area, start, str(exc), status=exc.status)
         if status in ("init", "diverged") or self._lost_since is not None:
             # A new start, or the level the model now reaches: the reference from here.
             self.watch.restart(e / area)
@@ -960,8 +999,8 @@ class SilhouetteTracker:
 
     def _lost(self, frame: int, energy: float, area: float, start: float, why: str,
               status: str = "lost") -> FrameResult:  # fmt: skip
-        """A frame without a pose (`status` "lost" or "absent"); the next frame starts afresh
-        (and is "recovered")."""
+        """A frame without a pose (`status` "lost", "absent" or "two-subjects"); the next frame
+        starts afresh (and is "recovered")."""
         self.history = []
         if self._lost_since is None and self._tracked_any:
             # (Frames before the first start are no gap: that start is "init".)
@@ -998,6 +1037,19 @@ class SilhouetteTracker:
         # A recovered pose has no velocity; the tracked one keeps its own.
         self.history = history if found is None else []
         return best_x, best_e, found
+
+
+def subjects_in_view(cameras: Sequence[Camera], masks: Sequence[np.ndarray],
+                     config: TrackConfig, unknown: Sequence[np.ndarray | None] | None = None,
+                     ) -> list[HullPart]:  # fmt: skip
+    """`SilhouetteTracker.subjects_in_view` for these cameras (any world frame)."""
+    try:
+        centre = rays_meeting_point(cameras, masks)
+    except ValueError:  # fewer than two views with a silhouette
+        return []
+    return subject_sized(hull_parts(cameras, masks, size_m=2 * config.hull_size_m,
+                                    voxel_m=2 * config.voxel_m, unknown=unknown,
+                                    up=rig_up(cameras, centre)))  # fmt: skip
 
 
 def limb_half_range(change: np.ndarray, frame_interval_s: float, config: TrackConfig,
@@ -1059,3 +1111,15 @@ def swap_sides(x: np.ndarray, limb: str) -> np.ndarray:
 
 class TrackingLost(Exception):
     """The subject cannot be found in this frame."""
+
+    status = "lost"
+
+
+class SubjectsInView(TrackingLost):
+    """Two subjects or more in view: the frame is refused, not tracked on a merged blob."""
+
+    status = "two-subjects"
+
+
+_GAP_WORDS = {"lost": "lost", "absent": "absent", "two-subjects": "refused (two subjects)"}
+"""How the event of a recovered frame names the frames without a pose before it."""
