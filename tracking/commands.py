@@ -109,6 +109,8 @@ class TrackCommand:
               + (f" ({summary['evaluations_per_second']:.0f} energy evaluations/s)"
                  if "evaluations_per_second" in summary else "")  # older runs lack it
               + f"; subject height {summary['height_m']:.2f} m")
+        for warning in summary.get("warnings", []):  # older runs lack them
+            print(f"warning: {warning}", file=sys.stderr)
         if summary["lost"]:
             print(f"lost       frames {summary['lost']}")
             print(f"warning: the subject was lost in {len(summary['lost'])} of "

@@ -209,6 +209,7 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
                                 unknown=unknown,
                                 frame_interval_s=1.0 / frame_rate)
     results: list[FrameResult] = []
+    warnings: list[str] = []
 
     logged = {frames[i] for i in np.unique(np.linspace(
         0, len(frames) - 1, min(step.logged_images, len(frames))).round().astype(int))}
@@ -223,6 +224,7 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
                 raise UserError(f"cannot start tracking at frame {frames[first]}: {exc}"
                                 ) from None
             bar.close()
+            warnings.extend(_short_shape_pass(config, shape_frames, tracker.shape_frames_used))
         bar = progress_bar(len(frames), "track", "frame", enabled=progress)
         for index, frame in enumerate(frames):
             masks = masks_of(frame)
@@ -253,11 +255,29 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         "evaluations_per_second": float(sum(r.evaluations for r in results)
                                         / max(sum(r.seconds for r in results), 1e-9)),
         "height_m": tracker.model.shape.height, "frame_rate": frame_rate,
+        "warnings": warnings,
         "body": tracker.model.record(),
     }
     ws.record_step("track", fp, outputs=list(outputs.values()), config=settings,
                    seconds=timer.seconds, summary=summary)
     return summary
+
+
+def _short_shape_pass(config: TrackConfig, frames: list[int], used: list[int]) -> list[str]:
+    """The warning for a shape pass that refined the segment lengths with fewer poses than a
+    full one (`TrackConfig.shape_frames` frames, every `shape_stride`-th): a sequence shorter
+    than the pass, or a subject lost in it. `frames`: the pass's frames; `used`: the indices
+    into them of the poses it used."""
+    full = len(range(0, config.shape_frames, config.shape_stride))
+    if len(used) >= full:
+        return []
+    names = ", ".join(str(frames[i]) for i in used)
+    why = (f"the sequence has {len(frames)} frames for --shape-frames {config.shape_frames}"
+           if len(frames) < config.shape_frames
+           else f"the shape pass lost the subject after frame {frames[used[-1]]}")
+    return [f"{why}: the body's shape comes from {len(used)} pose(s) (frame(s) {names}) "
+            f"instead of {full}, and is less certain; track a longer sequence, or give a known "
+            "shape with --init-pose"]
 
 
 def _all_foreground_message(ws: Workspace, cameras: Sequence[Any], frames: list[int]) -> str:

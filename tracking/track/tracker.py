@@ -497,6 +497,7 @@ class SilhouetteTracker:
         self._lost_since: int | None = None  # first frame of the current run of lost frames
         self._gap_statuses: set[str] = set()  # statuses of that run's frames
         self._tracked_any = False  # a frame has had a pose since the start (or shape pass)
+        self.shape_frames_used: list[int] = []  # `calibrate_shape`'s frames (indices)
         # (the frame's energy, level, its outline refiner): built once per frame and level
         self._refiner: tuple[SilhouetteEnergy, int, ContourRefiner] | None = None
         self.evaluations = 0
@@ -696,6 +697,10 @@ class SilhouetteTracker:
                 break
             if index % max(cfg.shape_stride, 1) == 0:
                 picked.append((masks, result.pose))
+        # Which frames of `sequence` (indices) the shape came from: fewer than a full pass's
+        # when the sequence is short or the pass lost the subject (`mocap track` warns).
+        self.shape_frames_used = [i for i in range(len(sequence))
+                                  if i % max(cfg.shape_stride, 1) == 0][:len(picked)]
         poses = self._refine_shape([m for m, _ in picked], [p for _, p in picked])
         # Tracking starts afresh from the first frame: nothing of the pass is a reference.
         self.history, self._last_good, self._lost_since = [], None, None

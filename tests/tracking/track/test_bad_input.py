@@ -185,3 +185,32 @@ def test_a_start_with_two_subjects_in_view_waits_for_one(tmp_path):
                                         r"are in view in frame\(s\) 0-3"):
         track_workspace(Workspace.open_video(crowded), TrackStepConfig(), FAST, progress=False)
     assert not (crowded / "tracks").exists()
+
+
+@pytest.mark.slow  # an automatic start and a shape pass: about a minute on 2 shared cores
+def test_a_sequence_too_short_for_the_shape_pass_is_warned_about(tmp_path):
+    """2 frames for a shape pass of 24 (every 4th: 6 poses): the shape comes from frame 0
+    alone, and the summary (printed by `mocap track`) says so; before, nothing did."""
+    ws = _ws_with_empty(tmp_path, ())
+    summary = track_workspace(Workspace.open_video(ws), TrackStepConfig(last=1), FAST,
+                              progress=False)  # fmt: skip
+    assert summary["tracked"] == 2
+    assert summary["warnings"] == [
+        "the sequence has 2 frames for --shape-frames 24: the body's shape comes from 1 "
+        "pose(s) (frame(s) 0) instead of 6, and is less certain; track a longer sequence, or "
+        "give a known shape with --init-pose"]
+
+
+def test_the_shape_pass_warning_says_why_it_had_fewer_poses():
+    from tracking.track.step import _short_shape_pass
+
+    config = TrackConfig(body="superquadric")  # 24 frames, every 4th: 6 poses
+    frames = list(range(10, 34))
+    assert _short_shape_pass(config, frames, [0, 4, 8, 12, 16, 20]) == []
+    lost = _short_shape_pass(config, frames, [0, 4])  # lost between frames 14 and 18
+    assert lost == ["the shape pass lost the subject after frame 14: the body's shape comes "
+                    "from 2 pose(s) (frame(s) 10, 14) instead of 6, and is less certain; "
+                    "track a longer sequence, or give a known shape with --init-pose"]
+    short = _short_shape_pass(config, frames[:9], [0, 4, 8])
+    assert short[0].startswith("the sequence has 9 frames for --shape-frames 24: the body's "
+                               "shape comes from 3 pose(s) (frame(s) 10, 14, 18) instead of 6")
