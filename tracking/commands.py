@@ -128,6 +128,10 @@ class TrackCommand:
             print(f"warning: two or more subjects in view in {len(summary['two_subjects'])} of "
                   f"{summary['frames']} frames: tracks/pose.json has no pose for them",
                   file=sys.stderr)
+        if summary.get("partly_out_of_view"):  # older runs lack it
+            print(f"partly out of view frames {summary['partly_out_of_view']} (a silhouette "
+                  "touches its image border: tracked on what the images show; pose.json names "
+                  "the cameras)")
         if summary.get("recovered"):  # older runs lack it
             print(f"recovered  frames {summary['recovered']} (found again by the start search)")
         if summary.get("diverged"):

@@ -238,17 +238,44 @@ def _with_unknown(masks: Sequence[np.ndarray], unknown: Sequence[np.ndarray | No
 
 def visual_hull(cameras: Sequence[Camera], masks: Sequence[np.ndarray], *, size_m: float,
                 voxel_m: float, unknown: Sequence[np.ndarray | None] | None = None,
-                ) -> tuple[np.ndarray, int, np.ndarray]:  # fmt: skip
+                min_views: int | None = None) -> tuple[np.ndarray, int, np.ndarray]:
     """(centres (n**3, 3), n, occupied (n**3,) bool): the exact visual hull on a cube of side
     ``size_m`` around the point where the centroid rays of the silhouettes and their unknown
-    pixels meet (``unknown``: as in :func:`carve`)."""
+    pixels meet (``unknown``, ``min_views``: as in :func:`carve`; by default every view with a
+    silhouette must see a voxel, see :func:`hull_min_views`)."""
     centre = rays_meeting_point(cameras, _with_unknown(masks, unknown))
     points, n = voxel_centres(centre, size_m, voxel_m)
     candidates, index = hull_candidates(cameras, masks, centre, size_m, voxel_m,
-                                        unknown=unknown)
+                                        unknown=unknown, min_views=min_views)
     occupied = np.zeros(len(points), bool)
-    occupied[index] = carve(cameras, masks, candidates, unknown=unknown)[0]
+    occupied[index] = carve(cameras, masks, candidates, unknown=unknown,
+                            min_views=min_views)[0]
     return points, n, occupied
+
+
+def cut_by_border(masks: Sequence[np.ndarray]) -> list[int]:
+    """Indices of the views whose silhouette touches its image's border: the subject is partly
+    outside that view (or a background blob reaches the edge)."""
+    out = []
+    for k, mask in enumerate(masks):
+        mask = np.asarray(mask, bool)
+        if mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any():
+            out.append(k)
+    return out
+
+
+def hull_min_views(masks: Sequence[np.ndarray]) -> int | None:
+    """``min_views`` for :func:`visual_hull` of a subject: None (every view with a silhouette)
+    unless a silhouette touches its image border, then all those views but one (at least two).
+    A view cannot carve what lies outside its image, and demanding it see every voxel cuts
+    from the hull what is out of its image (a head out of one of 4 views: the hull 0.55 m short,
+    the start 1.55 m tall for 1.75 and 223 mm off). One view less keeps it, and no more: a
+    voxel out of one view's image must lie inside all the other cones, which two opposite
+    views alone do not make (their cones meet along a line other views see across)."""
+    views = sum(bool(np.asarray(m).any()) for m in masks)
+    if views < 3 or not cut_by_border(masks):
+        return None
+    return views - 1
 
 
 @dataclass(frozen=True)
@@ -272,7 +299,8 @@ leave around one body do not."""
 
 def hull_parts(cameras: Sequence[Camera], masks: Sequence[np.ndarray], *, size_m: float,
                voxel_m: float, up: np.ndarray | None = None,
-               unknown: Sequence[np.ndarray | None] | None = None) -> list[HullPart]:
+               unknown: Sequence[np.ndarray | None] | None = None,
+               min_views: int | None = None) -> list[HullPart]:
     """The connected parts of the visual hull of ``masks`` (:func:`visual_hull` on a cube of
     side ``size_m``), largest first. One subject makes one part (its silhouettes are connected
     in every view); two subjects apart make two or more (each, and the ghosts where the rays
@@ -282,7 +310,7 @@ def hull_parts(cameras: Sequence[Camera], masks: Sequence[np.ndarray], *, size_m
     if sum(bool(np.asarray(m).any()) for m in masks) < 2:
         return []
     points, n, occupied = visual_hull(cameras, masks, size_m=size_m, voxel_m=voxel_m,
-                                      unknown=unknown)
+                                      unknown=unknown, min_views=min_views)
     labels, count = ndimage.label(occupied.reshape(n, n, n), np.ones((3, 3, 3), bool))
     labels = labels.ravel()
     parts = []

@@ -69,6 +69,7 @@ steps and the temporal prior's scales. At 30 fps they are the former per-frame c
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -99,6 +100,8 @@ from tracking.rig.cameras import rig_up
 from tracking.silhouettes.hull import (
     HullPart,
     check_voxel_grid,
+    cut_by_border,
+    hull_min_views,
     hull_parts,
     rays_meeting_point,
     subject_sized,
@@ -383,6 +386,10 @@ class FrameResult:
     "lost" (no pose), "absent" (no pose: no camera has a silhouette, the subject is out of
     view) or "two-subjects" (no pose: the visual hull has two or more separate parts of human
     size, `SilhouetteTracker.subjects_in_view`)."""
+    cut_by: tuple[str, ...] = ()
+    """Cameras whose silhouette touches the image border: the subject is partly out of their
+    view (a flag, whatever the status: the tracker fits what the image shows, and the visual
+    hull of a start keeps what is out of one view's image, `hull_min_views`)."""
 
     @property
     def xor_fraction(self) -> float:
@@ -519,7 +526,8 @@ class SilhouetteTracker:
         if not all(m.any() for m in masks):
             empty = [c.name for c, m in zip(self.cameras, masks, strict=True) if not m.any()]
             raise TrackingLost(f"empty silhouette in {', '.join(empty)}")
-        points, n, occupied = visual_hull(self.cameras, masks, size_m=self.config.hull_size_m,
+        points, n, occupied = visual_hull(self.cameras, masks, min_views=hull_min_views(masks),
+                                          size_m=self.config.hull_size_m,
                                           voxel_m=self.config.voxel_m, unknown=self.unknown)
         return points[surface_voxels(occupied, n)]
 
@@ -912,7 +920,15 @@ class SilhouetteTracker:
 
     def track(self, frame: int, masks: Sequence[np.ndarray], init: Pose | None = None
               ) -> FrameResult:  # fmt: skip
-        """Track one frame; masks: one (H, W) bool silhouette per camera."""
+        """Track one frame; masks: one (H, W) bool silhouette per camera. The result names
+        the cameras whose silhouette touches the image border (`FrameResult.cut_by`)."""
+        result = self._track(frame, masks, init)
+        cut = tuple(self.cameras[k].name for k in cut_by_border(masks))
+        return dataclasses.replace(result, cut_by=cut) if cut else result
+
+    def _track(self, frame: int, masks: Sequence[np.ndarray], init: Pose | None
+               ) -> FrameResult:  # fmt: skip
+        """`track` without the border flags."""
         start = time.perf_counter()
         self.evaluations = 0
         area = _known_area([np.asarray(m, bool) for m in masks], self.known)
@@ -1054,7 +1070,8 @@ def subjects_in_view(cameras: Sequence[Camera], masks: Sequence[np.ndarray],
         return []
     return subject_sized(hull_parts(cameras, masks, size_m=2 * config.hull_size_m,
                                     voxel_m=2 * config.voxel_m, unknown=unknown,
-                                    up=rig_up(cameras, centre)))  # fmt: skip
+                                    up=rig_up(cameras, centre),
+                                    min_views=hull_min_views(masks)))  # fmt: skip
 
 
 def limb_half_range(change: np.ndarray, frame_interval_s: float, config: TrackConfig,
