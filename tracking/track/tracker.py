@@ -53,7 +53,8 @@ a pose that is no divergence, "diverged" (its best pose kept, not trusted; its X
 reference from then on) when only the relative tests still fail, and "lost" (no joints; never
 NaN) when the absolute one does. `FrameResult.status` says which (`STATUSES`). A frame where
 no camera has a silhouette is "absent" (the subject left the view): no pose and no search; the
-next frame with silhouettes starts afresh from the visual hull and is "recovered". A frame
+next frame with silhouettes starts afresh from the visual hull and is "recovered" (or "lost"
+when that start's XOR is over the absolute bar an earlier start set). A frame
 whose visual hull has two separate parts of human size or more (`subjects_in_view`: two
 subjects apart, both in every camera's view) is "two-subjects": no pose, rather than a fit to
 the merged blob. It is looked for where a second subject shows: at a start from the hull, and
@@ -974,6 +975,13 @@ class SilhouetteTracker:
                 self._xor_floor = min(self._xor_floor, e / area)
             limit = max(self.config.max_xor_fraction, 1.5 * self._xor_floor) * area
             status, why = ("init" if event else "tracked"), ""
+            if event and self._lost_since is not None and e > limit:
+                # A new start after frames without a pose, over the bar an earlier start set:
+                # not "recovered" (a subject back in only some views, a second one out of
+                # the others' view).
+                return self._lost(frame, e, area, start, f"the start search after frames "
+                                  f"{self._lost_since}-{frame - 1} found nothing under the "
+                                  f"absolute bar {limit / area:.0%} (XOR {e / area:.1%})")
             if not event:
                 if e > limit:
                     why = (f"XOR {e / area:.1%} of the silhouette, over the absolute bar "
