@@ -218,7 +218,10 @@ def _silhouettes_outcome(ws: Workspace, record: StepRecord) -> StepOutcome:
 
 
 def _track_outcome(ws: Workspace, s: dict[str, Any]) -> StepOutcome:
-    notes = (f"lost frames {s['lost']}",) if s["lost"] else ()
+    notes = ((f"lost frames {s['lost']}",) if s["lost"] else ()) + (
+        (f"absent frames {s['absent']} (no subject in view)",) if s.get("absent") else ()) + (
+        (f"two-subject frames {s['two_subjects']} (not tracked)",)
+        if s.get("two_subjects") else ()) + tuple(f"warning: {w}" for w in s.get("warnings", []))
     return StepOutcome(
         "track", f"{s['tracked']}/{s['frames']} frames tracked, median XOR "
         f"{s['median_xor_fraction']:.1%} of the silhouette, subject height {s['height_m']:.2f} m",

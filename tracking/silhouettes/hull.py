@@ -238,17 +238,96 @@ def _with_unknown(masks: Sequence[np.ndarray], unknown: Sequence[np.ndarray | No
 
 def visual_hull(cameras: Sequence[Camera], masks: Sequence[np.ndarray], *, size_m: float,
                 voxel_m: float, unknown: Sequence[np.ndarray | None] | None = None,
-                ) -> tuple[np.ndarray, int, np.ndarray]:  # fmt: skip
+                min_views: int | None = None) -> tuple[np.ndarray, int, np.ndarray]:
     """(centres (n**3, 3), n, occupied (n**3,) bool): the exact visual hull on a cube of side
     ``size_m`` around the point where the centroid rays of the silhouettes and their unknown
-    pixels meet (``unknown``: as in :func:`carve`)."""
+    pixels meet (``unknown``, ``min_views``: as in :func:`carve`; by default every view with a
+    silhouette must see a voxel, see :func:`hull_min_views`)."""
     centre = rays_meeting_point(cameras, _with_unknown(masks, unknown))
     points, n = voxel_centres(centre, size_m, voxel_m)
     candidates, index = hull_candidates(cameras, masks, centre, size_m, voxel_m,
-                                        unknown=unknown)
+                                        unknown=unknown, min_views=min_views)
     occupied = np.zeros(len(points), bool)
-    occupied[index] = carve(cameras, masks, candidates, unknown=unknown)[0]
+    occupied[index] = carve(cameras, masks, candidates, unknown=unknown,
+                            min_views=min_views)[0]
     return points, n, occupied
+
+
+def cut_by_border(masks: Sequence[np.ndarray]) -> list[int]:
+    """Indices of the views whose silhouette touches its image's border: the subject is partly
+    outside that view (or a background blob reaches the edge)."""
+    out = []
+    for k, mask in enumerate(masks):
+        mask = np.asarray(mask, bool)
+        if mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any():
+            out.append(k)
+    return out
+
+
+def hull_min_views(masks: Sequence[np.ndarray]) -> int | None:
+    """``min_views`` for :func:`visual_hull` of a subject: None (every view with a silhouette)
+    unless a silhouette touches its image border, then all those views but one (at least two).
+    A view cannot carve what lies outside its image, and demanding it see every voxel cuts
+    from the hull what is out of its image (a head out of one of 4 views: the hull 0.55 m short,
+    the start 1.55 m tall for 1.75 and 223 mm off). One view less keeps it, and no more: a
+    voxel out of one view's image must lie inside all the other cones, which two opposite
+    views alone do not make (their cones meet along a line other views see across)."""
+    views = sum(bool(np.asarray(m).any()) for m in masks)
+    if views < 3 or not cut_by_border(masks):
+        return None
+    return views - 1
+
+
+@dataclass(frozen=True)
+class HullPart:
+    """A connected part of a visual hull (26-neighbours): its volume (m^3), its extent along
+    the rig's up (m; along its longest side when the rig gives no up) and its centre (3,)."""
+
+    volume_m3: float
+    height_m: float
+    centre: np.ndarray
+
+
+SUBJECT_MIN_HEIGHT_M = 0.8
+"""A hull part this tall (along up) and ...  """
+SUBJECT_MIN_VOLUME_M3 = 0.02
+"""... this large is of human size: a standing or walking adult's hull is 1.5-1.9 m tall and
+0.07-0.2 m^3 (fatter than the body with few views); a child of 1 m or a crouching adult
+passes too. A hand or a foot cut off by a view (a few litres) and the slivers that few views
+leave around one body do not."""
+
+
+def hull_parts(cameras: Sequence[Camera], masks: Sequence[np.ndarray], *, size_m: float,
+               voxel_m: float, up: np.ndarray | None = None,
+               unknown: Sequence[np.ndarray | None] | None = None,
+               min_views: int | None = None) -> list[HullPart]:
+    """The connected parts of the visual hull of ``masks`` (:func:`visual_hull` on a cube of
+    side ``size_m``), largest first. One subject makes one part (its silhouettes are connected
+    in every view); two subjects apart make two or more (each, and the ghosts where the rays
+    of the one meet those of the other). Empty when fewer than two views have a silhouette."""
+    from scipy import ndimage
+
+    if sum(bool(np.asarray(m).any()) for m in masks) < 2:
+        return []
+    points, n, occupied = visual_hull(cameras, masks, size_m=size_m, voxel_m=voxel_m,
+                                      unknown=unknown, min_views=min_views)
+    labels, count = ndimage.label(occupied.reshape(n, n, n), np.ones((3, 3, 3), bool))
+    labels = labels.ravel()
+    parts = []
+    for label in range(1, count + 1):
+        inside = points[labels == label]
+        if up is not None:
+            height = float(np.ptp(inside @ np.asarray(up, float))) + voxel_m
+        else:
+            height = float(np.ptp(inside, axis=0).max()) + voxel_m
+        parts.append(HullPart(len(inside) * voxel_m**3, height, inside.mean(axis=0)))
+    return sorted(parts, key=lambda p: -p.volume_m3)
+
+
+def subject_sized(parts: Sequence[HullPart]) -> list[HullPart]:
+    """The parts of human size (`SUBJECT_MIN_HEIGHT_M`, `SUBJECT_MIN_VOLUME_M3`)."""
+    return [p for p in parts
+            if p.height_m >= SUBJECT_MIN_HEIGHT_M and p.volume_m3 >= SUBJECT_MIN_VOLUME_M3]
 
 
 def surface_voxels(occupied: np.ndarray, n: int) -> np.ndarray:

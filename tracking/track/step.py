@@ -9,10 +9,15 @@ or `mocap silhouettes`) and writes, each atomically:
 * ``tracks/pose.json``: ``{"frame_rate", "shape": {BodyShape}, "body": {"name": the body
   model plugin, and what rebuilds its subject, e.g. mpfb's "macro"}, "world_from_upright":
   (3, 3), "frames": [{"frame", "params" (26, POSE_LAYOUT order) or null when lost, "energy_px",
-  "xor_fraction", "event", "status"}], "lost", "diverged", "recovered": [frame, ...]}``: a
-  frame's status is one of `tracking.track.tracker.STATUSES` (init, tracked, recovered,
-  diverged: a pose kept but not trusted, lost: no pose), and the three lists name the frames
-  of the last three (`status_lists`);
+  "xor_fraction", "event", "status", "partly_out_of_view": [camera, ...]}], "lost",
+  "diverged", "recovered", "absent", "two_subjects", "partly_out_of_view": [frame, ...]}``:
+  a frame's status is one of `tracking.track.tracker.STATUSES` (init, tracked, recovered,
+  diverged: a pose kept but not trusted, lost: no pose, absent: no pose, no camera sees a
+  subject, two-subjects: no pose, two subjects or more in view), and the lists name the
+  frames of the last five (`status_lists`) and those where a camera's silhouette touches
+  its image border (`FrameResult.cut_by`: the subject partly out of its view; a flag, not
+  a status). Tracking starts at the first frame with a silhouette in some camera and one
+  subject in view; frames before it are absent or two-subjects;
 * ``tracks/motion.bvh``: the tracked frames on the body skeleton (`tracking.body.motion`); a
   BVH has no gaps, so a lost frame repeats the last tracked pose (pose.json says which);
 * ``tracks/subject.glb``: the subject's mesh (the body model's full resolution) skinned on
@@ -22,9 +27,9 @@ or `mocap silhouettes`) and writes, each atomically:
   world frame, metres;
 * ``logs/track.rrd``: silhouettes and the XOR overlay per camera over the video frame
   (`TrackStepConfig.logged_images` of them), the body mesh and skeleton, the energy per
-  frame, and each frame's status (``track/status``: a text log, lost and diverged frames as
-  warnings; ``track/status_index``: its index in `STATUSES`), on the ``frame`` and ``time``
-  timelines.
+  frame, and each frame's status (``track/status``: a text log, lost, diverged, absent and
+  two-subjects frames as warnings; ``track/status_index``: its index in `STATUSES`), on the
+  ``frame`` and ``time`` timelines.
 
 The poses, the BVH and the recording are in the *upright frame* of the camera rig
 (`tracking.rig.cameras.upright_frame`): Y up, as the body model, BVH and OpenSim expect, and the
@@ -61,6 +66,7 @@ from tracking.track.tracker import (
     SilhouetteTracker,
     TrackConfig,
     TrackingLost,
+    subjects_in_view,
 )
 
 
@@ -175,32 +181,56 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
             raise UserError(_all_foreground_message(ws, cameras, frames))
         return masks
 
-    world_from_upright = _upright_frame(cameras, masks_of(frames[0]))
+    # The start: the first frame where some camera has a silhouette (the subject may enter
+    # the view after the recording began) of one subject; the frames before it are absent or
+    # show two subjects, and are refused as such.
+    first, crowded, unknown = None, [], unknown_pixels(ws, cameras)
+    for i, f in enumerate(frames):
+        masks = masks_of(f)
+        if not any(m.any() for m in masks):
+            continue
+        if len(subjects_in_view(cameras, masks, config, unknown)) >= 2:
+            crowded.append(f)
+            continue
+        first = i
+        break
+    if first is None:
+        from tracking.silhouettes.step import _ranges
+
+        raise UserError(f"{ws.silhouettes_dir}: no silhouette in any camera in any of frames "
+                        f"{frames[0]}-{frames[-1]}: nobody to track" if not crowded else
+                        f"{ws.silhouettes_dir}: no frame shows one subject: two or more "
+                        f"subjects are in view in frame(s) {_ranges(crowded, 1)} and nobody "
+                        "in the others; track frames with one subject (--first/--last)")
+    world_from_upright = _upright_frame(cameras, masks_of(frames[first]))
     if given is not None:
         assert init_pose is not None  # a file without a pose was refused above
         init_pose = pose_in_frame(init_pose, world_from_upright.T @ given.world_from_upright)
     upright = [c.in_frame(world_from_upright) for c in cameras]
     tracker = SilhouetteTracker(upright, config, model=init_model,
-                                unknown=unknown_pixels(ws, cameras),
+                                unknown=unknown,
                                 frame_interval_s=1.0 / frame_rate)
     results: list[FrameResult] = []
+    warnings: list[str] = []
 
     logged = {frames[i] for i in np.unique(np.linspace(
         0, len(frames) - 1, min(step.logged_images, len(frames))).round().astype(int))}
     with Timer() as timer, _Recorder(ws, upright, frame_rate, logged) as recorder:
         if init_model is None and config.shape_frames > 1:
-            shape_frames = frames[:config.shape_frames]
+            shape_frames = frames[first:first + config.shape_frames]
             bar = progress_bar(len(shape_frames), "shape", "frame", enabled=progress)
             try:
                 init_pose = tracker.calibrate_shape(
                     [masks_of(f) for f in shape_frames], progress=bar.update)
             except TrackingLost as exc:
-                raise UserError(f"cannot start tracking at frame {frames[0]}: {exc}") from None
+                raise UserError(f"cannot start tracking at frame {frames[first]}: {exc}"
+                                ) from None
             bar.close()
+            warnings.extend(_short_shape_pass(config, shape_frames, tracker.shape_frames_used))
         bar = progress_bar(len(frames), "track", "frame", enabled=progress)
         for index, frame in enumerate(frames):
             masks = masks_of(frame)
-            result = tracker.track(frame, masks, init=init_pose if index == 0 else None)
+            result = tracker.track(frame, masks, init=init_pose if index == first else None)
             results.append(result)
             recorder.frame(tracker, result, masks)
             bar.set_postfix_str(f"XOR {result.xor_fraction:.0%} {result.event}"[:40])
@@ -214,7 +244,10 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
     tracked = [r for r in results if r.pose is not None]
     summary = {
         "frames": len(results), "tracked": len(tracked),
-        "lost": [r.frame for r in results if r.pose is None],
+        "lost": [r.frame for r in results if r.status == "lost"],
+        "absent": [r.frame for r in results if r.status == "absent"],
+        "two_subjects": [r.frame for r in results if r.status == "two-subjects"],
+        "partly_out_of_view": [r.frame for r in results if r.cut_by],
         "diverged": [r.frame for r in results if r.status == "diverged"],
         "recovered": [r.frame for r in results if r.status == "recovered"],
         "events": {str(r.frame): r.event for r in results if r.event},
@@ -225,11 +258,29 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         "evaluations_per_second": float(sum(r.evaluations for r in results)
                                         / max(sum(r.seconds for r in results), 1e-9)),
         "height_m": tracker.model.shape.height, "frame_rate": frame_rate,
+        "warnings": warnings,
         "body": tracker.model.record(),
     }
     ws.record_step("track", fp, outputs=list(outputs.values()), config=settings,
                    seconds=timer.seconds, summary=summary)
     return summary
+
+
+def _short_shape_pass(config: TrackConfig, frames: list[int], used: list[int]) -> list[str]:
+    """The warning for a shape pass that refined the segment lengths with fewer poses than a
+    full one (`TrackConfig.shape_frames` frames, every `shape_stride`-th): a sequence shorter
+    than the pass, or a subject lost in it. `frames`: the pass's frames; `used`: the indices
+    into them of the poses it used."""
+    full = len(range(0, config.shape_frames, config.shape_stride))
+    if len(used) >= full:
+        return []
+    names = ", ".join(str(frames[i]) for i in used)
+    why = (f"the sequence has {len(frames)} frames for --shape-frames {config.shape_frames}"
+           if len(frames) < config.shape_frames
+           else f"the shape pass lost the subject after frame {frames[used[-1]]}")
+    return [f"{why}: the body's shape comes from {len(used)} pose(s) (frame(s) {names}) "
+            f"instead of {full}, and is less certain; track a longer sequence, or give a known "
+            "shape with --init-pose"]
 
 
 def _all_foreground_message(ws: Workspace, cameras: Sequence[Any], frames: list[int]) -> str:
@@ -285,10 +336,11 @@ def _upright_frame(cameras: Sequence[Any], masks: Sequence[np.ndarray]) -> np.nd
 def status_lists(results: Sequence[FrameResult]) -> dict[str, list[int]]:
     """pose.json's summary of the frames' `FrameResult.status`: the frames lost (no pose),
     diverged (a divergence that the start search found nothing better for: the best pose is
-    kept, but not trusted) and recovered (found again by the start search after a divergence
-    or after lost frames)."""
-    return {name: [r.frame for r in results if r.status == name]
-            for name in ("lost", "diverged", "recovered")}
+    kept, but not trusted), recovered (found again by the start search after a divergence
+    or after frames without a pose), absent (no pose: no camera has a silhouette) and
+    two_subjects (no pose: two subjects or more in view, status "two-subjects")."""
+    return {name.replace("-", "_"): [r.frame for r in results if r.status == name]
+            for name in ("lost", "diverged", "recovered", "absent", "two-subjects")}
 
 
 def _write_outputs(outputs: dict[str, Path], results: list[FrameResult], model: TrackedModel,
@@ -313,11 +365,13 @@ def _write_outputs(outputs: dict[str, Path], results: list[FrameResult], model: 
         "body": model.record(),
         "world_from_upright": world_from_upright.tolist(),
         **status_lists(results),
+        "partly_out_of_view": [r.frame for r in results if r.cut_by],
         "frames": [{"frame": r.frame,
                     "params": None if r.pose is None else [float(v) for v in r.pose.params],
                     "energy_px": None if not np.isfinite(r.energy) else r.energy,
                     "xor_fraction": None if not np.isfinite(r.energy) else r.xor_fraction,
-                    "event": r.event, "status": r.status} for r in results],
+                    "event": r.event, "status": r.status,
+                    "partly_out_of_view": list(r.cut_by)} for r in results],
     })  # fmt: skip
     held: list[Pose] = []
     last = next(r.pose for r in results if r.pose is not None)
@@ -417,11 +471,14 @@ class _Recorder:
                 if index == result.frame:
                     r.log_frame_image(self.rec, f"world/cameras/{r.entity_name(name)}/image",
                                       image, result.frame, t)  # fmt: skip
-        # The frame's status as a text log (lost and diverged frames as warnings) and as a
-        # scalar (its index in STATUSES) on the frame timeline.
-        level = "WARN" if result.status in ("lost", "diverged") else "INFO"
-        r.log_frame_text(self.rec, "track/status", f"{result.status}: {result.event}"
-                         if result.event else result.status, level, result.frame, t)
+        # The frame's status as a text log (lost, diverged and absent frames as warnings) and
+        # as a scalar (its index in STATUSES) on the frame timeline.
+        level = "WARN" if result.status in ("lost", "diverged", "absent",
+                                            "two-subjects") else "INFO"
+        text = f"{result.status}: {result.event}" if result.event else result.status
+        if result.cut_by:
+            text += f" (partly out of view of {', '.join(result.cut_by)})"
+        r.log_frame_text(self.rec, "track/status", text, level, result.frame, t)
         r.log_frame_scalar(self.rec, "track/status_index", STATUSES.index(result.status),
                            result.frame, t)  # fmt: skip
         if result.pose is None or tracker.model is None:

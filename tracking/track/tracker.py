@@ -51,7 +51,15 @@ grids over their whole range) and from the visual hull (`initialise`), and the c
 lowest XOR, the tracked pose included, is kept: the frame is "recovered" when the search found
 a pose that is no divergence, "diverged" (its best pose kept, not trusted; its XOR the
 reference from then on) when only the relative tests still fail, and "lost" (no joints; never
-NaN) when the absolute one does. `FrameResult.status` says which (`STATUSES`).
+NaN) when the absolute one does. `FrameResult.status` says which (`STATUSES`). A frame where
+no camera has a silhouette is "absent" (the subject left the view): no pose and no search; the
+next frame with silhouettes starts afresh from the visual hull and is "recovered" (or "lost"
+when that start's XOR is over the absolute bar an earlier start set). A frame
+whose visual hull has two separate parts of human size or more (`subjects_in_view`: two
+subjects apart, both in every camera's view) is "two-subjects": no pose, rather than a fit to
+the merged blob. It is looked for where a second subject shows: at a start from the hull, and
+on a divergence before the start search (the other subject's silhouettes are unexplained, so
+the XOR jumps).
 
 The search ranges scale with the frame interval (`frame_interval_s`, seconds), not with the
 frame index: a limb grid's half-range is `range_gain` times the change over the two preceding
@@ -62,6 +70,7 @@ steps and the temporal prior's scales. At 30 fps they are the former per-frame c
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -89,7 +98,17 @@ from tracking.body.model import (
 )
 from tracking.body.motion import zxy_twin
 from tracking.rig.cameras import rig_up
-from tracking.silhouettes.hull import check_voxel_grid, surface_voxels, visual_hull
+from tracking.silhouettes.hull import (
+    HullPart,
+    check_voxel_grid,
+    cut_by_border,
+    hull_min_views,
+    hull_parts,
+    rays_meeting_point,
+    subject_sized,
+    surface_voxels,
+    visual_hull,
+)
 from tracking.track.contour import ContourConfig, ContourRefiner, refine_shape
 from tracking.track.divergence import WatchConfig, XorWatch
 from tracking.track.energy import SilhouetteEnergy, counted
@@ -346,7 +365,8 @@ class TrackConfig:
         return np.array([i for i in range(N_POSE_PARAMS) if i not in held])
 
 
-STATUSES = ("init", "tracked", "recovered", "diverged", "lost")
+STATUSES = ("init", "tracked", "recovered", "diverged", "lost", "absent", "two-subjects")
+"""A frame's `FrameResult.status`; new ones go at the end (the recording logs the index)."""
 
 
 @dataclass(frozen=True)
@@ -359,11 +379,18 @@ class FrameResult:
     silhouette_area: float
     evaluations: int
     seconds: float
-    event: str = ""  # "init ...", "recovered ...", "diverged: ...", "lost: ..." or ""
+    event: str = ""  # "init ...", "recovered ...", "diverged: ...", "lost: ...", "absent: ..."
     status: str = "tracked"
     """One of `STATUSES`: "init" (a start), "tracked", "recovered" (a divergence, or the first
-    frame after lost ones, found again by the start search), "diverged" (a divergence the
-    search found nothing better for: the best pose is kept, not trusted) or "lost" (no pose)."""
+    frame after lost or absent ones, found again by the start search), "diverged" (a
+    divergence the search found nothing better for: the best pose is kept, not trusted),
+    "lost" (no pose), "absent" (no pose: no camera has a silhouette, the subject is out of
+    view) or "two-subjects" (no pose: the visual hull has two or more separate parts of human
+    size, `SilhouetteTracker.subjects_in_view`)."""
+    cut_by: tuple[str, ...] = ()
+    """Cameras whose silhouette touches the image border: the subject is partly out of their
+    view (a flag, whatever the status: the tracker fits what the image shows, and the visual
+    hull of a start keeps what is out of one view's image, `hull_min_views`)."""
 
     @property
     def xor_fraction(self) -> float:
@@ -476,6 +503,9 @@ class SilhouetteTracker:
             high_frames=cfg.high_xor_frames, window=cfg.xor_window, min_margin=cfg.xor_margin))
         self._last_good: tuple[int, np.ndarray] | None = None  # (frame, params) last trusted
         self._lost_since: int | None = None  # first frame of the current run of lost frames
+        self._gap_statuses: set[str] = set()  # statuses of that run's frames
+        self._tracked_any = False  # a frame has had a pose since the start (or shape pass)
+        self.shape_frames_used: list[int] = []  # `calibrate_shape`'s frames (indices)
         # (the frame's energy, level, its outline refiner): built once per frame and level
         self._refiner: tuple[SilhouetteEnergy, int, ContourRefiner] | None = None
         self.evaluations = 0
@@ -497,9 +527,29 @@ class SilhouetteTracker:
         if not all(m.any() for m in masks):
             empty = [c.name for c, m in zip(self.cameras, masks, strict=True) if not m.any()]
             raise TrackingLost(f"empty silhouette in {', '.join(empty)}")
-        points, n, occupied = visual_hull(self.cameras, masks, size_m=self.config.hull_size_m,
+        points, n, occupied = visual_hull(self.cameras, masks, min_views=hull_min_views(masks),
+                                          size_m=self.config.hull_size_m,
                                           voxel_m=self.config.voxel_m, unknown=self.unknown)
         return points[surface_voxels(occupied, n)]
+
+    def subjects_in_view(self, masks: Sequence[np.ndarray]) -> list[HullPart]:
+        """The parts of human size of the visual hull of ``masks`` (`hull_parts`,
+        `subject_sized`), largest first: one for one subject in view, two or more for two
+        subjects apart (the silhouettes of two subjects that touch make one part). Carved
+        on a cube twice `hull_size_m` wide at twice `voxel_m` (0.1 s at 320x240), so that a
+        second subject beside the first is in it; only the space every camera sees counts."""
+        return subjects_in_view(self.cameras, masks, self.config, self.unknown)
+
+    def _one_subject(self, masks: Sequence[np.ndarray]) -> None:
+        """`SubjectsInView` when the silhouettes show two subjects or more."""
+        parts = self.subjects_in_view(masks)
+        if len(parts) >= 2:
+            heights = ", ".join(f"{p.height_m:.2f}" for p in parts)
+            apart = float(np.linalg.norm(parts[0].centre - parts[1].centre))
+            raise SubjectsInView(
+                f"{len(parts)} subjects in view: the visual hull has {len(parts)} separate "
+                f"parts of human size ({heights} m tall; the two largest {apart:.2f} m apart), "
+                "so the frame is not tracked")
 
     def initialise(self, masks: Sequence[np.ndarray], init: Pose | None = None) -> tuple[Pose, str]:
         """The first pose: `init` if given, else the best of a body fitted to the visual hull and
@@ -519,6 +569,7 @@ class SilhouetteTracker:
         """`initialise` without a given pose."""
         from tracking.fit.body_fit import FitConfig, fit_body
 
+        self._one_subject(masks)  # a fit to two subjects' hull would merge them
         points = self.visual_hull_points(masks)
         if len(points) < 100:
             raise TrackingLost("the silhouettes do not intersect in a visual hull")
@@ -655,9 +706,14 @@ class SilhouetteTracker:
                 break
             if index % max(cfg.shape_stride, 1) == 0:
                 picked.append((masks, result.pose))
+        # Which frames of `sequence` (indices) the shape came from: fewer than a full pass's
+        # when the sequence is short or the pass lost the subject (`mocap track` warns).
+        self.shape_frames_used = [i for i in range(len(sequence))
+                                  if i % max(cfg.shape_stride, 1) == 0][:len(picked)]
         poses = self._refine_shape([m for m, _ in picked], [p for _, p in picked])
         # Tracking starts afresh from the first frame: nothing of the pass is a reference.
         self.history, self._last_good, self._lost_since = [], None, None
+        self._gap_statuses, self._tracked_any = set(), False
         self.watch.restart()
         return Pose(self._refine_all(self._energy(picked[0][0]), poses[0].params.copy(),
                                      init=True))
@@ -865,11 +921,24 @@ class SilhouetteTracker:
 
     def track(self, frame: int, masks: Sequence[np.ndarray], init: Pose | None = None
               ) -> FrameResult:  # fmt: skip
-        """Track one frame; masks: one (H, W) bool silhouette per camera."""
+        """Track one frame; masks: one (H, W) bool silhouette per camera. The result names
+        the cameras whose silhouette touches the image border (`FrameResult.cut_by`)."""
+        result = self._track(frame, masks, init)
+        cut = tuple(self.cameras[k].name for k in cut_by_border(masks))
+        return dataclasses.replace(result, cut_by=cut) if cut else result
+
+    def _track(self, frame: int, masks: Sequence[np.ndarray], init: Pose | None
+               ) -> FrameResult:  # fmt: skip
+        """`track` without the border flags."""
         start = time.perf_counter()
         self.evaluations = 0
         area = _known_area([np.asarray(m, bool) for m in masks], self.known)
         empty = [c.name for c, m in zip(self.cameras, masks, strict=True) if not m.any()]
+        if len(empty) == len(masks):
+            # Nobody in view: the subject left (issue 20). No search; the first frame with
+            # silhouettes again starts afresh from the visual hull (and is "recovered").
+            return self._lost(frame, float("nan"), area, start, "no silhouette in any camera "
+                              "(the subject is out of view)", status="absent")
         # Foreground in every pixel: the background model failed, and the silhouette has no
         # outline to fit (its distance field is infinite).
         full = [c.name for c, m in zip(self.cameras, masks, strict=True) if m.all()]
@@ -896,6 +965,8 @@ class SilhouetteTracker:
                     # Another pass from the result, with the ranges of a small change.
                     x = self._refine_all(energy, x, change=np.abs(x - predicted) / 2)
             e = energy(Pose(x))
+            if event and e > self.config.max_xor_fraction * area:
+                self._one_subject(masks)  # a given start, and a second subject beside it
             if event:
                 # What the silhouettes allow: real masks have holes and ghosts, so the first
                 # frame's XOR sets the bar (at least `max_xor_fraction`) for the divergence test.
@@ -904,6 +975,13 @@ class SilhouetteTracker:
                 self._xor_floor = min(self._xor_floor, e / area)
             limit = max(self.config.max_xor_fraction, 1.5 * self._xor_floor) * area
             status, why = ("init" if event else "tracked"), ""
+            if event and self._lost_since is not None and e > limit:
+                # A new start after frames without a pose, over the bar an earlier start set:
+                # not "recovered" (a subject back in only some views, a second one out of
+                # the others' view).
+                return self._lost(frame, e, area, start, f"the start search after frames "
+                                  f"{self._lost_since}-{frame - 1} found nothing under the "
+                                  f"absolute bar {limit / area:.0%} (XOR {e / area:.1%})")
             if not event:
                 if e > limit:
                     why = (f"XOR {e / area:.1%} of the silhouette, over the absolute bar "
@@ -911,7 +989,10 @@ class SilhouetteTracker:
                 elif not self._starting:  # the shape pass's model is not the subject's yet
                     why = self.watch.verdict(e / area)
             if why:
-                # Divergence: the start search again, from the last good pose and the hull.
+                # A second subject makes a divergence (its silhouettes are unexplained): say
+                # so, and track no merged blob. Else the start search again, from the last
+                # good pose and the hull.
+                self._one_subject(masks)
                 x, e, found = self._recover(masks, energy, x, e)
                 if e > limit:
                     return self._lost(frame, e, area, start, f"{why}; the start search found "
@@ -928,9 +1009,11 @@ class SilhouetteTracker:
                     event = f"recovered from {found} (XOR {e / area:.1%}): {why}"
             elif status == "init" and self._lost_since is not None:
                 status = "recovered"
-                event = f"recovered after frames {self._lost_since}-{frame - 1} were lost: {event}"
+                gap = " or ".join(_GAP_WORDS[s] for s in sorted(self._gap_statuses))
+                event = (f"recovered after frames {self._lost_since}-{frame - 1} were {gap}: "
+                         f"{event}")
         except TrackingLost as exc:
-            return self._lost(frame, float("nan"), area, start, str(exc))
+            return self._lost(frame, float("nan"), area, start, str(exc), status=exc.status)
         if status in ("init", "diverged") or self._lost_since is not None:
             # A new start, or the level the model now reaches: the reference from here.
             self.watch.restart(e / area)
@@ -938,21 +1021,24 @@ class SilhouetteTracker:
             self.watch.accept(e / area)
         if status != "diverged" and self.watch.streak == 0:
             self._last_good = (frame, x.copy())
-        self._lost_since = None
+        self._lost_since, self._gap_statuses, self._tracked_any = None, set(), True
         self.history = [*self.history[-1:], x]
         return FrameResult(frame, Pose(x), e, area, self.evaluations,
                            time.perf_counter() - start, event, status)  # fmt: skip
 
-    def _lost(self, frame: int, energy: float, area: float, start: float, why: str
-              ) -> FrameResult:  # fmt: skip
-        """A lost frame: no pose; the next frame starts afresh (and is "recovered")."""
+    def _lost(self, frame: int, energy: float, area: float, start: float, why: str,
+              status: str = "lost") -> FrameResult:  # fmt: skip
+        """A frame without a pose (`status` "lost", "absent" or "two-subjects"); the next frame
+        starts afresh (and is "recovered")."""
         self.history = []
-        if self._lost_since is None:
+        if self._lost_since is None and self._tracked_any:
+            # (Frames before the first start are no gap: that start is "init".)
             self._lost_since = frame
+        self._gap_statuses.add(status)
         if np.isfinite(energy) and "XOR" not in why:
             why = f"XOR {energy / area:.0%} of the silhouette area; {why}"
         return FrameResult(frame, None, energy, area, self.evaluations,
-                           time.perf_counter() - start, f"lost: {why}", "lost")  # fmt: skip
+                           time.perf_counter() - start, f"{status}: {why}", status)  # fmt: skip
 
     def _recover(self, masks: Sequence[np.ndarray], energy: SilhouetteEnergy, x: np.ndarray,
                  e: float) -> tuple[np.ndarray, float, str | None]:  # fmt: skip
@@ -980,6 +1066,20 @@ class SilhouetteTracker:
         # A recovered pose has no velocity; the tracked one keeps its own.
         self.history = history if found is None else []
         return best_x, best_e, found
+
+
+def subjects_in_view(cameras: Sequence[Camera], masks: Sequence[np.ndarray],
+                     config: TrackConfig, unknown: Sequence[np.ndarray | None] | None = None,
+                     ) -> list[HullPart]:  # fmt: skip
+    """`SilhouetteTracker.subjects_in_view` for these cameras (any world frame)."""
+    try:
+        centre = rays_meeting_point(cameras, masks)
+    except ValueError:  # fewer than two views with a silhouette
+        return []
+    return subject_sized(hull_parts(cameras, masks, size_m=2 * config.hull_size_m,
+                                    voxel_m=2 * config.voxel_m, unknown=unknown,
+                                    up=rig_up(cameras, centre),
+                                    min_views=hull_min_views(masks)))  # fmt: skip
 
 
 def limb_half_range(change: np.ndarray, frame_interval_s: float, config: TrackConfig,
@@ -1041,3 +1141,15 @@ def swap_sides(x: np.ndarray, limb: str) -> np.ndarray:
 
 class TrackingLost(Exception):
     """The subject cannot be found in this frame."""
+
+    status = "lost"
+
+
+class SubjectsInView(TrackingLost):
+    """Two subjects or more in view: the frame is refused, not tracked on a merged blob."""
+
+    status = "two-subjects"
+
+
+_GAP_WORDS = {"lost": "lost", "absent": "absent", "two-subjects": "refused (two subjects)"}
+"""How the event of a recovered frame names the frames without a pose before it."""

@@ -57,7 +57,8 @@ def test_pose_json_carries_each_frame_status_and_the_lost_and_recovered_frames(t
     assert [f["status"] for f in written["frames"]] == ["init", "tracked", "lost", "recovered",
                                                          "diverged", "tracked"]
     assert (written["lost"], written["diverged"], written["recovered"]) == ([2], [4], [3])
-    assert status_lists(results) == {"lost": [2], "diverged": [4], "recovered": [3]}
+    assert status_lists(results) == {"lost": [2], "diverged": [4], "recovered": [3],
+                                     "absent": [], "two_subjects": []}
     # The readers of pose.json (mocap report, --init-pose) read it as before: frame 2 lost.
     given = read_pose_file(outputs["pose"])
     assert [f for f, p in given.frames if p is None] == [2] and len(given.frames) == 6
