@@ -111,23 +111,20 @@ class TrackCommand:
               + f"; subject height {summary['height_m']:.2f} m")
         for warning in summary.get("warnings", []):  # older runs lack them
             print(f"warning: {warning}", file=sys.stderr)
-        if summary["lost"]:
-            print(f"lost       frames {summary['lost']}")
-            print(f"warning: the subject was lost in {len(summary['lost'])} of "
-                  f"{summary['frames']} frames (see the events above): tracks/pose.json has no "
-                  "pose for them and motion.bvh repeats the last tracked one", file=sys.stderr)
-        if summary.get("absent"):  # older runs lack it
-            print(f"absent     frames {summary['absent']} (no silhouette in any camera: the "
-                  "subject is out of view; no pose)")
-            print(f"warning: no subject in view in {len(summary['absent'])} of "
-                  f"{summary['frames']} frames: tracks/pose.json has no pose for them",
-                  file=sys.stderr)
-        if summary.get("two_subjects"):  # older runs lack it
-            print(f"two subjects frames {summary['two_subjects']} (two or more subjects in "
-                  "view: not tracked; no pose)")
-            print(f"warning: two or more subjects in view in {len(summary['two_subjects'])} of "
-                  f"{summary['frames']} frames: tracks/pose.json has no pose for them",
-                  file=sys.stderr)
+        without_pose = (  # summary key, the frames' label and why, the warning's subject
+            ("lost", "lost", "", "the subject was lost"),
+            ("absent", "absent", " (no silhouette in any camera: the subject is out of view; "
+             "no pose)", "no subject in view"),
+            ("two_subjects", "two subjects", " (two or more subjects in view: not tracked; no "
+             "pose)", "two or more subjects in view"),
+        )  # fmt: skip
+        for key, label, why, subject in without_pose:
+            if summary.get(key):  # older runs lack absent and two_subjects
+                print(f"{label:<10} frames {summary[key]}{why}")
+                print(f"warning: {subject} in {len(summary[key])} of {summary['frames']} frames "
+                      "(see the events above): tracks/pose.json has no pose for them"
+                      + (" and motion.bvh repeats the last tracked one" if key == "lost" else ""),
+                      file=sys.stderr)  # fmt: skip
         if summary.get("partly_out_of_view"):  # older runs lack it
             print(f"partly out of view frames {summary['partly_out_of_view']} (a silhouette "
                   "touches its image border: tracked on what the images show; pose.json names "
