@@ -106,11 +106,19 @@ class Case:
     evaluations_per_s: float
     evaluations_per_frame: float
     median_xor: float
+    status: dict[int, str]
+    """Each frame's status in tracks/pose.json (`tracking.track.tracker.STATUSES`)."""
+    per_frame_mm: dict[int, float]
+    """MPJPE of each frame with a pose."""
+
+    @property
+    def worst_joint(self) -> str:
+        return max(self.per_joint, key=self.per_joint.__getitem__)
 
 
-def synth_subject(ws: Path, clip: Path, body: list[str]) -> None:
-    """`mocap synth` of ``clip`` (4 ring cameras, 640x480) with the ``body`` flags."""
-    mocap("synth", str(ws), "--bvh", str(clip), "--cameras", "4", "--size", "640x480", *body)
+def synth_subject(ws: Path, clip: Path, flags: list[str]) -> None:
+    """`mocap synth` of ``clip`` (4 ring cameras, 640x480) with further ``flags``."""
+    mocap("synth", str(ws), "--bvh", str(clip), "--cameras", "4", "--size", "640x480", *flags)
 
 
 def track_case(ws: Path, label: str, tracker: list[str], frames: int | None) -> Case:
@@ -121,11 +129,16 @@ def track_case(ws: Path, label: str, tracker: list[str], frames: int | None) -> 
     seconds = mocap("track", str(ws), "--overwrite", *tracker, *extra)
     truth, tracked = _joints(ws / "gt" / "joints.csv"), _joints(ws / "tracks" / "joints.csv")
     run = json.loads((ws / "run.json").read_text())["steps"]["track"]["summary"]
+    pose = json.loads((ws / "tracks" / "pose.json").read_text())
     scored = sorted(f for f in truth if not frames or f < frames)
     errors: dict[str, list[np.ndarray]] = defaultdict(list)
+    per_frame: dict[int, float] = {}
     for f in scored:
         for name, xyz in tracked.get(f, {}).items():
             errors[name].append(xyz - truth[f][name])
+        if f in tracked:
+            per_frame[f] = 1000 * float(np.mean([np.linalg.norm(xyz - truth[f][n])
+                                                 for n, xyz in tracked[f].items()]))  # fmt: skip
     lost = [f for f in scored if f not in tracked]
     norms = {n: 1000 * np.linalg.norm(np.array(v), axis=1) for n, v in errors.items()}
     offset_free = [1000 * np.linalg.norm(np.array(v) - np.mean(v, axis=0), axis=1)
@@ -134,7 +147,8 @@ def track_case(ws: Path, label: str, tracker: list[str], frames: int | None) -> 
                 float(np.mean(np.concatenate(offset_free))),
                 {n: float(np.mean(v)) for n, v in norms.items()}, lost,
                 len(scored) / seconds, run["evaluations_per_frame"] * len(scored) / seconds,
-                run["evaluations_per_frame"], run["median_xor_fraction"])  # fmt: skip
+                run["evaluations_per_frame"], run["median_xor_fraction"],
+                {e["frame"]: e.get("status", "?") for e in pose["frames"]}, per_frame)  # fmt: skip
 
 
 SUBJECTS: tuple[tuple[str, Path, list[str]], ...] = (
