@@ -187,6 +187,13 @@ class FitConfig:
                   "skinned --body, then the acceptance test); the accepted one of the "
                   "lowest cost wins"},
     )  # fmt: skip
+    fallback_orientations: int = field(
+        default=4,
+        metadata={"help": "when no fit is accepted, orientations searched again from each "
+                  "fallback start in turn: the trunk fitted from the cloud's centroid (a body "
+                  "off its feet), then the trunk fits ranked with each limb on its best "
+                  "configuration (a seated body); 0: none (a refusal comes sooner)"},
+    )  # fmt: skip
     seed: int = field(default=0, metadata={"help": "seed of the point subset"})
     body: str = field(
         default="mpfb",
@@ -212,6 +219,9 @@ class FitConfig:
         for name in self.hold:
             if name not in _HOLDABLE:
                 raise UserError(f"--hold {name}: only {' and '.join(_HOLDABLE)} can be held")
+        if self.fallback_orientations < 0:
+            raise UserError(f"--fallback-orientations {self.fallback_orientations}: expected 0 "
+                            "or more")
 
     def free(self, size: int) -> np.ndarray:
         """The unknowns 0..size-1 that are fitted: all but the pose parameters of `hold`."""
@@ -623,7 +633,7 @@ def _prescored(problem: Any, x: np.ndarray, points: np.ndarray, limb: str,
 
 def with_limbs(problem: Any, x: np.ndarray, points: np.ndarray) -> tuple[float, np.ndarray]:
     """(cost, x) with each limb in turn set to its grid candidate of the lowest cost, no ICP:
-    a trunk fit ranked with its limbs (`_LIMB_RANKED`)."""
+    a trunk fit ranked with its limbs (the second fallback start of `fit_body`)."""
     cost = problem.cost(x, points, np.arange(0, problem.n_samples, 4))
     for limb in _LIMBS:
         starts = [_limb_values(limb, candidate) for candidate in _candidates(limb)]
@@ -815,16 +825,16 @@ def fit_body(points: np.ndarray, config: FitConfig | None = None,
         return scored
 
     # The stages of the search, each only while no fit is accepted: the standing start; the
-    # centroid start (`_CENTRED_ORIENTATIONS`), for a body that is not on its feet; both
-    # starts' trunk fits ranked with their limbs (`_LIMB_RANKED`).
+    # centroid start, for a body that is not on its feet; both starts' trunk fits ranked with
+    # their limbs, for a seated one (`FitConfig.fallback_orientations`; see the note on them).
     candidates += search(roots, config.max_orientations, config.orientations)
-    if not any(v[0] for v in verdicts(fits)):
+    if config.fallback_orientations and not any(v[0] for v in verdicts(fits)):
         centred = trunk_fits(centred=True)
-        candidates += len(centred) + search(centred, _CENTRED_ORIENTATIONS, 0)
+        candidates += len(centred) + search(centred, config.fallback_orientations, 0)
         if not any(v[0] for v in verdicts(fits)):
             ranked = [with_limbs(problem, x, coarse) for _, x in roots + centred]
             candidates += len(ranked) * sum(len(_candidates(limb)) for limb in _LIMBS)
-            candidates += search(ranked, _LIMB_RANKED, 0)
+            candidates += search(ranked, config.fallback_orientations, 0)
     assert fits
     # The accepted fit of the lowest cost wins; when none is accepted, the failed fit reported
     # is the judged one of the lowest cost too (on a skinned body, its mesh's). Ranked on the
@@ -839,28 +849,23 @@ def fit_body(points: np.ndarray, config: FitConfig | None = None,
                      time.perf_counter() - start, candidates, model, model_to_cloud)  # fmt: skip
 
 
-_CENTRED_ORIENTATIONS: int = 4
-"""Orientations searched again, when none of `FitConfig.max_orientations` gave an accepted fit,
-from trunk fits started with the pelvis at the cloud's centroid (`_initial_x` ``centred``). A
-CMU cartwheel frame (held-out 460) had every trunk fit of the standing start (its pelvis
-285 mm off; the centroid is 144 mm off) end at a higher cost than wrong orientations'; from the
-centroid, orientations 20-29 degrees from the truth had the lowest costs (that frame is still
-refused, 118 mm off, was 473; an arms-overhead frame refused for a forearm from every standing
-orientation is fitted from the centroid, 2.4 mm). As the only start,
-the centroid cost a CMU dance frame (449) its accepted fit: a fallback, it changes no fit that
-the standing start gets accepted."""
-
-
-_LIMB_RANKED: int = 4
-"""Orientations searched, when neither start gave an accepted fit, from the trunk fits of both
-starts ranked by their cost with each limb set to its best grid candidate (`with_limbs`). The
-trunk alone ranks a seated body's roots badly: on two CMU sit-stand frames (860, 1721) the
-first root within 30 degrees of the truth was 124th and 63rd of 320; with the limbs, 3rd and
-12th. Measured in session 20 on the refused frames of three sets (the accepted ones do not
-reach this stage): sit-stand 860 (fresh) accepted at 2.6 mm, was refused 314 mm off;
-arms-overhead 958 and 1198 (unseen) accepted at 2.5 mm, were refused at 84 and 100 mm; still
-refused, unchanged: sit-stand 1721, kick 640 (fresh), cartwheel 115 and 460 (held-out). The
-count, 4, was not tuned; a wider arm grid searched after this stage fixed none of those."""
+# The fallback starts (`FitConfig.fallback_orientations` orientations each, 4, not tuned), run
+# in turn only while no fit is accepted, so they change no fit accepted before them:
+# - The trunk fitted with the pelvis at the cloud's centroid (`_initial_x` ``centred``). A CMU
+#   cartwheel frame (held-out 460) had every trunk fit of the standing start (its pelvis 285 mm
+#   off; the centroid is 144 mm off) end at a higher cost than wrong orientations'; from the
+#   centroid, orientations 20-29 degrees from the truth had the lowest costs (that frame is
+#   still refused, 118 mm off, was 473; an arms-overhead frame refused for a forearm from every
+#   standing orientation is fitted from the centroid, 2.4 mm). As the only start, the centroid
+#   cost a CMU dance frame (449) its accepted fit.
+# - The trunk fits of both starts ranked with each limb set to its best grid candidate
+#   (`with_limbs`). The trunk alone ranks a seated body's roots badly: on two CMU sit-stand
+#   frames (860, 1721) the first root within 30 degrees of the truth was 124th and 63rd of 320;
+#   with the limbs, 3rd and 12th. Measured in session 20 on the refused frames of three sets:
+#   sit-stand 860 (fresh) accepted at 2.6 mm, was refused 314 mm off; arms-overhead 958 and
+#   1198 (unseen) accepted at 2.5 mm, were refused at 84 and 100 mm; still refused, unchanged:
+#   sit-stand 1721, kick 640 (fresh), cartwheel 115 and 460 (held-out). A wider arm grid
+#   searched after this stage fixed none of those.
 
 
 NOMINAL_HEIGHT_M: float = 1.75

@@ -128,7 +128,8 @@ def test_cli_fit_reports_failure_with_exit_code_2(tmp_path):
     cloud = tmp_path / "box.ply"
     _write_cloud(cloud, box)
     result = run_cli("fit", "--cloud", cloud, "--out", tmp_path / "out", "--orientations", "2",
-                     "--max-orientations", "2", "--body", "superquadric")  # fmt: skip
+                     "--max-orientations", "2", "--body", "superquadric",
+                     "--fallback-orientations", "0")  # fmt: skip
     assert result.returncode == 2
     assert result.stderr.strip().count("\n") == 0 and "does not look like" in result.stderr
     assert json.loads((tmp_path / "out" / "fit.json").read_text())["success"] is False

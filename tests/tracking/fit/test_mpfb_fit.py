@@ -76,10 +76,10 @@ def test_cli_mpfb_fit_of_a_box_fails_and_still_writes_the_body(tmp_path):
     cloud = tmp_path / "box.ply"
     o3d.io.write_point_cloud(str(cloud), o3d.geometry.PointCloud(o3d.utility.Vector3dVector(box)))
     out = tmp_path / "fit"
-    # One orientation, judged (the search's depth is not what this test is about).
+    # One orientation, judged, no fallback (the search's depth is not what this test is about).
     done = run_cli("fit", "--cloud", cloud, "--out", out, "--body", "mpfb", "--no-isolate",
                    "--orientations", "1", "--max-orientations", "1",
-                   "--judged", "1")  # fmt: skip
+                   "--judged", "1", "--fallback-orientations", "0")  # fmt: skip
     assert done.returncode == 2, done.stderr
     assert "does not look like one human body" in done.stderr
     data = json.loads((out / "fit.json").read_text())
@@ -227,8 +227,8 @@ def test_a_seated_body_is_fitted_from_the_roots_ranked_with_limbs():
     """Sit-stand frame 860, seated on a stool (knees bent 119-143 degrees, thighs abducted,
     the trunk leaning 40 degrees), the cloud of `benchmarks/body_fit.py --clips fresh`: the
     trunk alone ranked its right roots 124th of 320, and every searched orientation was
-    refused (reported 314 mm off). Ranked with the limbs (`_LIMB_RANKED`), it is accepted
-    (session 20: 2.6 mm)."""
+    refused (reported 314 mm off). Ranked with the limbs (the second fallback start), it is
+    accepted (session 20: 2.6 mm)."""
     pose = _real_pose("cmu_sit_stand.bvh", 860)
     points, _ = body_cloud(MISMATCHED, pose, np.random.default_rng(1005))
     result = fit_body(points, FitConfig(body="mpfb"))
