@@ -8,8 +8,8 @@ Each clip (`CLIPS`: walk, run, jump, cartwheel, ...; some in Daz naming, which t
 retargeting reads) is rendered by `mocap synth` with its defaults (4 ring cameras, 640x480,
 30 fps, noisy silhouettes, MakeHuman's skinned body with `tracking.rig.synth.SUBJECT_SHAPE` in
 2 cm of loose clothing: not the tracker's start), ``--frames`` frames from ``--start`` (by
-default synth's: clip frame 1 when frame 0 is a T-pose, as in cmu_run, else 0; but 1 for the
-three Daz-named clips, whose T-pose synth keeps: `STARTS`). `mocap track`
+default synth's: clip frame 1 when frame 0 is a T-pose, as in cmu_run and the three
+Daz-named clips, else 0; `tracking.body.bvh.leading_reference_frames`). `mocap track`
 tracks it with its defaults (the automatic start, the shape pass): the path users run is the
 path scored. ``--trackers`` (default: both, on the same silhouettes):
 
@@ -32,7 +32,8 @@ Targets (issue 20, the current tracker): mean MPJPE over the suite <= 30 mm, no 
 Measured (session 20, ``--frames 30``, both trackers, in four runs of this script on the
 same code: ``--clips walk run jump squat kick wave``, ``--clips climb_steps dance boxing
 sit_stand cartwheel``, ``--clips bend_pickup arms_overhead turn_pirouette start_walk_stop``
-and, after `STARTS` was added, ``--clips climb_steps kick sit_stand``; the 2 cores shared with
+and, from clip frame 1, ``--clips climb_steps kick sit_stand`` (what synth's default is
+since it drops the Daz clips' T-pose too); the 2 cores shared with
 other jobs, load 3 to 9 during the first two, so frames/s are low bounds). Current tracker:
 MPJPE (offsets out), worst joint, frames over 100 mm, frames/s, statuses other than tracked:
 
@@ -71,7 +72,7 @@ climb_steps's from frame 3 on (308 and 305 mm, steady: 19.8 and 13.7 mm once eac
 mean offset is removed);
 the cartwheel starts at 30% XOR (the others at 9-16%; its absolute bar is then 1.5 times
 that) and is off in 20 frames as the legs swing up over the pelvis, two of them "recovered"
-to poses still off. Without `STARTS` (synth's default, the T-pose at frame 0), kick and
+to poses still off. From the T-pose at frame 0 (synth's default until session 20), kick and
 sit_stand were 126.9 and 66.9 mm (a wrist 543 and 326 mm off from frame 1 on, unflagged)
 and climb_steps 7.7 mm (its frame 1, at 36.7% XOR, recovered by the absolute bar). Each clip
 is scored on its first second (``--start`` moves the window). With 8 frames instead of 30
@@ -96,12 +97,6 @@ CLIPS: dict[str, str] = {"walk": "cmu_02_01_walk.bvh"} | {
         "sit_stand", "climb_steps", "kick", "arms_overhead", "turn_pirouette")
 } | {"start_walk_stop": "cmu_131_01_start_walk_stop.bvh"}  # fmt: skip
 """Short name -> file of mocap_bvh/ (the walk first)."""
-STARTS: dict[str, int] = {"climb_steps": 1, "kick": 1, "sit_stand": 1}
-"""First clip frame of the clips whose frame 0 is a T-pose that synth's default keeps: in these
-three Daz-named clips only 3 joints jump from frame 0 to 1, too few for
-`tracking.body.bvh.leading_reference_frames`, but the arms drop from horizontal (wrists 1.1 m
-apart at shoulder height, then about 0.5 m apart at hip height): a teleport no tracker
-follows."""
 TRACKERS: dict[str, list[str]] = {
     "current": [],
     "former": ["--spike-xor-factor", "0", "--high-xor-frames", "0"],
@@ -123,9 +118,9 @@ def unrecovered(status: dict[int, str], within: int = RECOVERY_FRAMES) -> list[i
 
 
 def start_frames(specs: list[str], clips: list[str]) -> dict[str, int | None]:
-    """``--start`` values (``N`` for every clip, ``NAME=N`` for one) over `STARTS` as clip ->
+    """``--start`` values (``N`` for every clip, ``NAME=N`` for one) as clip ->
     first clip frame, None where synth's default holds."""
-    out: dict[str, int | None] = {clip: STARTS.get(clip) for clip in clips}
+    out: dict[str, int | None] = dict.fromkeys(clips)
     for spec in specs:
         name, _, value = spec.rpartition("=")
         for clip in [name] if name else clips:
@@ -165,7 +160,7 @@ def main() -> None:
         nargs="+",
         default=[],
         metavar="N|NAME=N",
-        help="first clip frame, for every clip or one (default: STARTS, else synth's)",
+        help="first clip frame, for every clip or one (default: synth's)",
     )
     parser.add_argument("--trackers", nargs="+", default=list(TRACKERS), choices=TRACKERS)
     parser.add_argument("--size", default="640x480", help="image size (default: synth's)")

@@ -425,15 +425,22 @@ REFERENCE_TURN_DEG = 20.0
 """A joint "jumps" between two frames when its local rotation turns by more than this."""
 REFERENCE_MIN_JOINTS = 4
 """Frame 0 is a reference pose when at least this many joints jump into frame 1 ..."""
+REFERENCE_REST_DEG = 15.0
+"""... or when every joint but the root is within this of its rest rotation in frame 0 (the
+skeleton's own T-pose) and more joints jump into frame 1 than in any later step."""
+
+
+def rotation_angles_deg(rotations: np.ndarray) -> np.ndarray:
+    """(...) the geodesic angle of each (..., 3, 3) rotation from the identity, in degrees."""
+    cos = np.clip((np.trace(rotations, axis1=-2, axis2=-1) - 1) / 2, -1.0, 1.0)
+    return np.degrees(np.arccos(cos))
 
 
 def joint_turns_deg(motion: Motion) -> np.ndarray:
     """(F-1, J) each joint's turn (geodesic angle of its local rotation) from each frame to the
     next, in degrees; an Euler wrap-around (179 to -179) counts as the 2 degrees it is."""
     rot = local_rotations(motion)
-    relative = np.einsum("fjba,fjbc->fjac", rot[:-1], rot[1:])  # R_k^T R_k+1
-    cos = np.clip((np.trace(relative, axis1=-2, axis2=-1) - 1) / 2, -1.0, 1.0)
-    return np.degrees(np.arccos(cos))
+    return rotation_angles_deg(np.einsum("fjba,fjbc->fjac", rot[:-1], rot[1:]))  # R_k^T R_k+1
 
 
 def leading_reference_frames(motion: Motion) -> int:
@@ -446,12 +453,20 @@ def leading_reference_frames(motion: Motion) -> int:
     than 2 joints that far (a wrist or toe glitch); the other 3 (walk, start-walk-stop, wave)
     start moving at once (no joint jumps). Frame 0 is a reference pose when at least
     `REFERENCE_MIN_JOINTS` joints jump into frame 1, more than twice as many as in any later
-    step. (The 3 clips with Daz names jump 3 joints there: too few to tell, so they are kept.)
+    step. The 3 clips with Daz names jump only 3 joints there (the shoulders drop the arms from
+    horizontal), against at most 2 in a later step; their frame 0 is their skeleton's rest
+    pose (no joint but the root turned more than 10.3 degrees from it; in their frame 1, 22.6-23.4;
+    the 3 CMU-named clips that move from frame 0 turn joints 90-96 degrees there), so a rest
+    pose in frame 0 that more joints jump out of than in any later step is a reference pose
+    too (`REFERENCE_REST_DEG`).
     """
     if motion.num_frames < 3:
         return 0
     jumps = (joint_turns_deg(motion) > REFERENCE_TURN_DEG).sum(axis=1)
-    return int(jumps[0] >= max(REFERENCE_MIN_JOINTS, 2 * jumps[1:].max() + 1))
+    if jumps[0] >= max(REFERENCE_MIN_JOINTS, 2 * jumps[1:].max() + 1):
+        return 1
+    rest = rotation_angles_deg(local_rotations(motion)[0, 1:]).max() <= REFERENCE_REST_DEG
+    return int(rest and jumps[0] > jumps[1:].max())
 
 
 def local_translations(motion: Motion) -> np.ndarray:

@@ -77,6 +77,7 @@ def random_rotations(rng: np.random.Generator, n: int) -> np.ndarray:
 @pytest.mark.parametrize(("name", "reference"), [
     (WALK, 0), (START_WALK_STOP, 0), ("cmu_wave.bvh", 0),  # moving from frame 0
     ("cmu_run.bvh", 1), ("cmu_squat.bvh", 1), ("cmu_boxing.bvh", 1),  # a T-pose in frame 0
+    ("cmu_kick.bvh", 1), ("cmu_sit_stand.bvh", 1), ("cmu_climb_steps.bvh", 1),  # Daz's rest pose
 ])  # fmt: skip
 def test_a_leading_t_pose_is_a_reference_frame(name: str, reference: int) -> None:
     motion = read_bvh(cmu(name))
