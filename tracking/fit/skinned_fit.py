@@ -188,7 +188,7 @@ def refine_skinned(body: str, height_m: float, pose: Pose, points: np.ndarray,
     x = problem.icp(x, points, everything, rounds=config.body_rounds, steps=_STEPS_PER_ROUND)
     coarse = points[np.random.default_rng(config.seed).choice(
         len(points), min(400, len(points)), replace=False)]
-    x = search_limbs(problem, x, coarse)
+    x = search_limbs(problem, x, coarse, grid=config.arm_grid)
     challenger = best_leg_pair(problem, x, coarse)
     fits = [problem.icp(y, points, everything, rounds=config.body_rounds, steps=_STEPS_PER_ROUND)
             for y in (x, challenger)]  # fmt: skip
@@ -212,7 +212,7 @@ def repair_limbs(model: TrackedModel, pose: Pose, points: np.ndarray, config: Fi
     coarse = points[np.random.default_rng(config.seed).choice(
         len(points), min(400, len(points)), replace=False)]
     x = search_limbs(problem, x, coarse, limbs, exhaustive=True,
-                     dense=points if thorough else None)
+                     dense=points if thorough else None, grid=config.arm_grid)
     x = problem.icp(x, points, config.free(len(x)), rounds=config.body_rounds,
                     steps=_STEPS_PER_ROUND)  # fmt: skip
     return problem.model(x), Pose(x[:N_POSE_PARAMS])
