@@ -63,3 +63,18 @@ def test_the_bars_keep_a_margin_over_a_small_median_and_restart_at_a_new_level()
     # Off: nothing is flagged.
     off = XorWatch(dataclasses.replace(WATCH, spike_factor=0.0, high_frames=0))
     assert not any(_verdicts(off, [0.1] * 5 + [0.5] * 10))
+
+
+def test_the_start_is_the_reference_until_enough_frames_follow_it():
+    """A track that leaves its start at once must not set its own reference: climb_steps went
+    from its start at 9.6% XOR to 17.9% in the next frame, both wrists 300 mm off, and the
+    first three frames' median was that wrong level (session 21)."""
+    watch = XorWatch(WATCH)
+    watch.restart(0.096)
+    assert watch.reference() == pytest.approx(0.096)
+    assert "recent median 9.6%" in watch.verdict(0.179)
+    # A frame near the start's level is not flagged, and enters the reference.
+    assert watch.verdict(0.11) == ""
+    # Without a start's value (the shape pass's restart) nothing speaks until 3 frames.
+    watch.restart()
+    assert watch.reference() is None and watch.verdict(0.5) == ""
