@@ -29,55 +29,52 @@ frames per second over the clip (start-up, shape pass and tracking).
 Targets (issue 20, the current tracker): mean MPJPE over the suite <= 30 mm, no clip above
 50 mm, no frame lost without recovery within 5 frames, >= 1 frame/s.
 
-Measured (session 20, ``--frames 30``, both trackers, in four runs of this script on the
-same code: ``--clips walk run jump squat kick wave``, ``--clips climb_steps dance boxing
-sit_stand cartwheel``, ``--clips bend_pickup arms_overhead turn_pirouette start_walk_stop``
-and, from clip frame 1, ``--clips climb_steps kick sit_stand`` (what synth's default is
-since it drops the Daz clips' T-pose too); the 2 cores shared with
-other jobs, load 3 to 9 during the first two, so frames/s are low bounds). Current tracker:
-MPJPE (offsets out), worst joint, frames over 100 mm, frames/s, statuses other than tracked:
+Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
+of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
+with one other job, so frames/s are low bounds). MPJPE (offsets out), worst joint, frames/s,
+statuses other than tracked:
 
-    walk              10.6 mm (8.2)    l_elbow 28 mm    0 off  0.49
-    run                8.0 mm (6.7)    r_wrist 20       0      0.63
-    jump              34.4 mm (16.8)   r_knee 71        0      0.39
-    squat             30.8 mm (19.8)   l_wrist 308      0      0.24
-    kick               9.2 mm (8.2)    r_wrist 47       0      0.79
-    wave               6.9 mm (4.4)    r_wrist 18       0      0.16
-    climb_steps       48.6 mm (13.7)   l_wrist 305      0      0.50
-    dance             10.9 mm (5.1)    r_elbow 23       0      0.48
-    boxing            21.3 mm (11.5)   l_wrist 72       0      0.68
-    sit_stand         11.3 mm (10.2)   r_wrist 25       0      0.60
-    cartwheel        131.3 mm (137.0)  r_ankle 649     20      0.36  13, 25 recovered
-    bend_pickup       49.7 mm (32.1)   l_wrist 94       0      0.50  22 diverged
-    arms_overhead      8.6 mm (4.0)    r_knee 16        0      0.67
-    turn_pirouette    12.9 mm (9.8)    l_elbow 38       0      0.64
-    start_walk_stop   12.1 mm (9.1)    r_elbow 31       0      0.72
+    walk              10.6 mm (8.2)    l_elbow 28      0.67
+    run                8.0 mm (6.7)    r_wrist 20      0.53
+    jump              34.4 mm (16.8)   r_knee 71       0.80
+    cartwheel        131.3 mm (137.0)  r_ankle 649     0.38  13, 25 recovered; 20 frames off
+    dance             10.9 mm (5.1)    r_elbow 23      0.92
+    boxing            21.3 mm (11.5)   l_wrist 72      0.87
+    bend_pickup       49.7 mm (32.1)   l_wrist 94      0.61  22 diverged
+    wave               6.9 mm (4.4)    r_wrist 18      0.91
+    squat             30.8 mm (19.8)   l_wrist 308     0.84
+    sit_stand          6.8 mm (3.6)    r_ankle 13      0.61  1 recovered
+    climb_steps        8.1 mm (3.3)    l_knee 18       0.63  1 recovered
+    kick               9.2 mm (8.2)    r_wrist 47      0.79
+    arms_overhead      8.6 mm (4.0)    r_knee 16       0.57
+    turn_pirouette    12.9 mm (9.8)    l_elbow 38      0.63
+    start_walk_stop   12.1 mm (9.1)    r_elbow 31      0.80
 
-Targets, current tracker: mean MPJPE over the 15 clips **27.1 mm**, met (30); clips above
-50 mm: the cartwheel, **not met** (bend_pickup 49.7 and climb_steps 48.6 just under); frames
-lost or diverged without recovery within 5 frames: bend_pickup's frame 22 (20.6% XOR over a
-20.0% bar for 3 frames in a row, the start search found nothing better), **not met**; >= 1
-frame/s: **not met** on any clip (0.16-0.79: over 30 frames the start and the shape pass,
-which tracks the first 24 frames twice, dominate; tracking_synthetic's 1.05-1.38 are over
-the whole 343-frame walk). The walk: **10.6 mm** (8.2 offsets out), 0.49 frames/s.
+Targets: mean MPJPE over the 15 clips **24.1 mm**, met (30; session 20: 27.1); no clip above
+50 mm: **not met**, the cartwheel (bend_pickup 49.7 just under); no frame lost without
+recovery within 5 frames: **not met**, bend_pickup's frame 22; >= 1 frame/s: **not met**
+(0.53-0.92 over 30 frames, the start and the shape pass included). The walk: 10.6 mm, as in
+session 20. Every clip but two tracks exactly as in session 20 (the tracker is deterministic):
+the divergence watch's reference is now the start's XOR until 3 frames follow it, and
+climb_steps (48.6 -> 8.1 mm: both wrists 305 mm off from frame 3, unflagged) and sit_stand
+(11.3 -> 6.8) are each recovered at frame 1. Unflagged still: the squat's left wrist, 308 mm
+off from the start (the twist prior holds its turned forearm back; README).
 
-The former tracker (watch off), same silhouettes: the same figures on every clip but the
-cartwheel (181.7 mm, 163.9 offsets out, 30 frames off, one recovery at 15 by the absolute
-bar) and bend_pickup (55.3 mm, 34.2 offsets out, nothing flagged): mean 30.8 mm, two clips
-above 50 mm, nothing unrecovered because nothing is flagged. The watch fired on those two
-clips only.
+The start's two options, measured in the same session on all 15 clips (one tracker per run):
+``--init-starts 3``: mean 16.8 mm (cartwheel 34.8 with frames 5 and 26 diverged and 28-29
+lost, bend_pickup 56.4, squat 17.0, the walk 10.8); both ``--init-starts 3 --init-twists 3``:
+24.8 (squat 32.0, cartwheel 150.9, climb_steps 12.0); and those with ``--twist-weight
+0.0025``: 19.5 (squat 8.0, boxing 38.8 with a wrist 170 mm off unflagged, bend_pickup 55.7).
+None became the default: see the README (the Pose2Sim demo, and a clean synthetic start that
+3 starts put a wrist 233 mm off).
 
-What the statuses do not tell: the squat's left wrist is wrong from the start and
-climb_steps's from frame 3 on (308 and 305 mm, steady: 19.8 and 13.7 mm once each joint's
-mean offset is removed);
-the cartwheel starts at 30% XOR (the others at 9-16%; its absolute bar is then 1.5 times
-that) and is off in 20 frames as the legs swing up over the pelvis, two of them "recovered"
-to poses still off. From the T-pose at frame 0 (synth's default until session 20), kick and
-sit_stand were 126.9 and 66.9 mm (a wrist 543 and 326 mm off from frame 1 on, unflagged)
-and climb_steps 7.7 mm (its frame 1, at 36.7% XOR, recovered by the absolute bar). Each clip
-is scored on its first second (``--start`` moves the window). With 8 frames instead of 30
-the walk's start swaps the legs (288.5 mm, 27.6 offsets out, at 27% XOR and no flag): a shape
-pass of 8 frames is too short.
+Session 20 (the former watch, the grid's best alone): walk 10.6, run 8.0, jump 34.4, squat
+30.8 (l_wrist 308, unflagged), kick 9.2, wave 6.9, climb_steps 48.6 (both wrists 305 mm off
+from frame 3, unflagged), dance 10.9, boxing 21.3, sit_stand 11.3, cartwheel 131.3,
+bend_pickup 49.7 (22 diverged, never recovered), arms_overhead 8.6, turn_pirouette 12.9,
+start_walk_stop 12.1: mean 27.1 mm. Each clip is scored on its first second (``--start``
+moves the window). With 8 frames instead of 30 the walk's start swapped the legs (288.5 mm,
+27.6 offsets out, at 27% XOR and no flag): a shape pass of 8 frames is too short.
 """
 
 from __future__ import annotations
