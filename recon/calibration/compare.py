@@ -42,6 +42,7 @@ class Method:
 METHODS: tuple[Method, ...] = (
     Method("kruppa", "kruppa", ("refine=false",)),
     Method("kruppa-pp", "kruppa-pp", ("refine=false",)),
+    Method("kruppa-pp-epipolar", "kruppa-pp", ("refine=false", "principal_point=epipolar")),
     Method("kruppa-per-image", "kruppa", ("refine=false", "camera_mode=per-image")),
     Method("kruppa+ba", "kruppa", ("refine=true",)),
     Method("colmap-default+ba", "colmap-default"),
@@ -197,13 +198,15 @@ def _mode(method: Method, details: dict[str, Any], num_cameras: int) -> str:
         return ""
     if details.get("camera_mode") == "per-image":
         return f"per-image focal ({num_cameras} camera(s))"
-    if details.get("principal_point_mode") == "free":
+    mode = details.get("principal_point_mode")
+    if mode in ("free", "epipolar"):
         fit = details.get("principal_point") or {}
         held = fit.get("held_at_centre") or []
         state = fit.get("status", "not fit")
         if state == "ok" and held:
             state = f"ok, c{held[0]} held at centre"
-        return f"shared focal, free principal point ({state})"
+        how = " from the inliers" if mode == "epipolar" else ""
+        return f"shared focal, free principal point{how} ({state})"
     return "shared focal, principal point at centre"
 
 

@@ -33,7 +33,8 @@ def test_compare_on_the_synthetic_scene(demo_ws):
     assert data == json.loads(json_copy.read_text())
     assert data["ground_truth_focal_px"] == pytest.approx(TRUE_FOCAL)
     assert set(data["methods"]) == {
-        "kruppa", "kruppa-pp", "kruppa-per-image", "kruppa+ba", "colmap-default+ba",
+        "kruppa", "kruppa-pp", "kruppa-pp-epipolar", "kruppa-per-image", "kruppa+ba",
+        "colmap-default+ba",
         "view-graph", "view-graph+ba"
     }
     for name, method in data["methods"].items():
@@ -54,9 +55,12 @@ def test_compare_on_the_synthetic_scene(demo_ws):
     assert methods["kruppa-pp"]["mode"].startswith("shared focal, free principal point")
     # Accepted or rejected, the principal point used stays near the truth (the demo's is the
     # image centre) and a rejection is said in the notes.
-    assert methods["kruppa-pp"]["principal_point_error_px"] < 10.0
-    fit = methods["kruppa-pp"]["principal_point_fit"]
-    assert fit["status"] == "ok" or any("rejected" in n for n in methods["kruppa-pp"]["notes"])
+    for name in ("kruppa-pp", "kruppa-pp-epipolar"):
+        assert methods[name]["principal_point_error_px"] < 10.0, name
+        fit = methods[name]["principal_point_fit"]
+        assert fit["status"] == "ok" or any("rejected" in n for n in methods[name]["notes"])
+    assert methods["kruppa-pp-epipolar"]["mode"].startswith(
+        "shared focal, free principal point from the inliers")
     assert methods["kruppa"]["principal_point_error_px"] < 1.0
     assert "principal point" in result.outputs["report"].read_text()
     assert result.outputs["principal_points_png"].stat().st_size > 1000
