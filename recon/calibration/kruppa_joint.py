@@ -52,6 +52,7 @@ import enum
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -323,24 +324,12 @@ def estimate_focal_and_principal_point(
         held_at_centre=tuple("xy"[axis - 1] for axis in held) if len(held) == 1 else (),
     )
     where = f"({pp[0]:.1f}, {pp[1]:.1f}) px ±({sigma_pp[0]:.1f}, {sigma_pp[1]:.1f})"
-    lo, hi = focal_range_px or (0.0, math.inf)
-    if not converged or not (lo <= focal <= hi) or not np.all(np.isfinite(params)):
-        return PrincipalPointEstimate(
-            status=PrincipalPointStatus.FAILED, **common,
-            message=f"the fit did not converge to a plausible focal ({focal:.1f} px)",
-        )
-    if not (0.0 <= pp[0] <= width and 0.0 <= pp[1] <= height):
-        return PrincipalPointEstimate(
-            status=PrincipalPointStatus.OUTSIDE_IMAGE, **common,
-            message=f"principal point {where} lies outside the {width}x{height} image",
-        )
+    refused = _refused(common, converged and bool(np.all(np.isfinite(params))), focal,
+                       sigma_focal, pp, where, (width, height), focal_range_px, config,
+                       fit="fit", focal_of=f"the fit with principal point {where}")
+    if refused is not None:
+        return refused
     constrained = [v for v in sigma_pp if math.isfinite(v)]
-    if not sigma_focal <= config.max_relative_focal_sigma * focal:
-        return PrincipalPointEstimate(
-            status=PrincipalPointStatus.POORLY_CONSTRAINED, **common,
-            message=f"the focal {focal:.1f} ±{sigma_focal:.1f} px of the fit with principal "
-            f"point {where} is too uncertain (more than {config.max_relative_focal_sigma:.0%})",
-        )
     if len(held) == 2 or not constrained or max(constrained) > limit:
         return PrincipalPointEstimate(
             status=PrincipalPointStatus.POORLY_CONSTRAINED, **common,
@@ -352,6 +341,35 @@ def estimate_focal_and_principal_point(
         "constrain it" if len(held) == 1 else ""
     )
     return PrincipalPointEstimate(status=PrincipalPointStatus.OK, **common, message=message)
+
+
+def _refused(common: dict, converged: bool, focal: float, sigma_focal: float,
+             pp: Sequence[float], where: str, size: tuple[int, int],
+             focal_range_px: tuple[float, float] | None, config: Any, *, fit: str,
+             focal_of: str) -> PrincipalPointEstimate | None:  # fmt: skip
+    """The gates every free-principal-point fit passes (`estimate_focal_and_principal_point`,
+    `estimate_intrinsics_epipolar`): a fit that did not converge to a focal in
+    `focal_range_px`, a principal point outside the image, or a focal whose standard error is
+    over `config.max_relative_focal_sigma`; the refused estimate, or None when it passes."""
+    width, height = size
+    lo, hi = focal_range_px or (0.0, math.inf)
+    if not converged or not (lo <= focal <= hi):
+        return PrincipalPointEstimate(
+            status=PrincipalPointStatus.FAILED, **common,
+            message=f"the {fit} did not converge to a plausible focal ({focal:.1f} px)",
+        )
+    if not (0.0 <= pp[0] <= width and 0.0 <= pp[1] <= height):
+        return PrincipalPointEstimate(
+            status=PrincipalPointStatus.OUTSIDE_IMAGE, **common,
+            message=f"principal point {where} lies outside the {width}x{height} image",
+        )
+    if not sigma_focal <= config.max_relative_focal_sigma * focal:
+        return PrincipalPointEstimate(
+            status=PrincipalPointStatus.POORLY_CONSTRAINED, **common,
+            message=f"the focal {focal:.1f} ±{sigma_focal:.1f} px of {focal_of} is too "
+            f"uncertain (more than {config.max_relative_focal_sigma:.0%})",
+        )
+    return None
 
 
 # One focal per camera -----------------------------------------------------------------------
@@ -806,24 +824,12 @@ def estimate_intrinsics_epipolar(
         median_residual=float(np.median(np.abs(solution.fun))),
     )
     where = f"({pp[0]:.1f}, {pp[1]:.1f}) px ±({sigma_pp[0]:.1f}, {sigma_pp[1]:.1f})"
-    lo, hi = focal_range_px or (0.0, math.inf)
-    if not solution.success or not (lo <= focal <= hi) or not np.all(np.isfinite(params)):
-        return PrincipalPointEstimate(
-            status=PrincipalPointStatus.FAILED, **common,
-            message=f"the epipolar fit did not converge to a plausible focal ({focal:.1f} px)",
-        )
-    if not (0.0 <= pp[0] <= width and 0.0 <= pp[1] <= height):
-        return PrincipalPointEstimate(
-            status=PrincipalPointStatus.OUTSIDE_IMAGE, **common,
-            message=f"principal point {where} lies outside the {width}x{height} image",
-        )
+    refused = _refused(common, bool(solution.success) and bool(np.all(np.isfinite(params))),
+                       focal, sigma_focal, pp, where, (width, height), focal_range_px, config,
+                       fit="epipolar fit", focal_of="the epipolar fit")
+    if refused is not None:
+        return refused
     limit = config.max_principal_point_sigma_factor * longest
-    if not sigma_focal <= config.max_relative_focal_sigma * focal:
-        return PrincipalPointEstimate(
-            status=PrincipalPointStatus.POORLY_CONSTRAINED, **common,
-            message=f"the focal {focal:.1f} ±{sigma_focal:.1f} px of the epipolar fit is too "
-            f"uncertain (more than {config.max_relative_focal_sigma:.0%})",
-        )
     if not max(sigma_pp) <= limit:
         return PrincipalPointEstimate(
             status=PrincipalPointStatus.POORLY_CONSTRAINED, **common,
