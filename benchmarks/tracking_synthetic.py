@@ -38,7 +38,7 @@ import sys
 import tempfile
 import time
 from collections import defaultdict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -110,6 +110,8 @@ class Case:
     """Each frame's status in tracks/pose.json (`tracking.track.tracker.STATUSES`)."""
     per_frame_mm: dict[int, float]
     """MPJPE of each frame with a pose."""
+    unexplained: list[int] = field(default_factory=list)
+    """The frames pose.json flags as unexplained (`tracking.track.unexplained`)."""
 
     @property
     def worst_joint(self) -> str:
@@ -148,7 +150,8 @@ def track_case(ws: Path, label: str, tracker: list[str], frames: int | None) -> 
                 {n: float(np.mean(v)) for n, v in norms.items()}, lost,
                 len(scored) / seconds, run["evaluations_per_frame"] * len(scored) / seconds,
                 run["evaluations_per_frame"], run["median_xor_fraction"],
-                {e["frame"]: e.get("status", "?") for e in pose["frames"]}, per_frame)  # fmt: skip
+                {e["frame"]: e.get("status", "?") for e in pose["frames"]}, per_frame,
+                pose.get("unexplained", []))  # fmt: skip
 
 
 SUBJECTS: tuple[tuple[str, Path, list[str]], ...] = (

@@ -129,6 +129,12 @@ class TrackCommand:
             print(f"partly out of view frames {summary['partly_out_of_view']} (a silhouette "
                   "touches its image border: tracked on what the images show; pose.json names "
                   "the cameras)")
+        if summary.get("unexplained"):  # older runs lack it
+            print(f"unexplained frames {summary['unexplained']} (the visual hull has a part "
+                  "the body leaves out: a limb is likely misplaced; their poses are kept, but "
+                  "not trusted)")
+            print(f"warning: a limb is likely misplaced in {len(summary['unexplained'])} of "
+                  f"{summary['frames']} frames (pose.json: unexplained)", file=sys.stderr)
         if summary.get("recovered"):  # older runs lack it
             print(f"recovered  frames {summary['recovered']} (found again by the start search)")
         if summary.get("diverged"):

@@ -9,15 +9,19 @@ or `mocap silhouettes`) and writes, each atomically:
 * ``tracks/pose.json``: ``{"frame_rate", "shape": {BodyShape}, "body": {"name": the body
   model plugin, and what rebuilds its subject, e.g. mpfb's "macro"}, "world_from_upright":
   (3, 3), "frames": [{"frame", "params" (26, POSE_LAYOUT order) or null when lost, "energy_px",
-  "xor_fraction", "event", "status", "partly_out_of_view": [camera, ...]}], "lost",
-  "diverged", "recovered", "absent", "two_subjects", "partly_out_of_view": [frame, ...]}``:
+  "xor_fraction", "event", "status", "partly_out_of_view": [camera, ...],
+  "unexplained_hull"}], "lost", "diverged", "recovered", "absent", "two_subjects",
+  "partly_out_of_view", "unexplained": [frame, ...]}``:
   a frame's status is one of `tracking.track.tracker.STATUSES` (init, tracked, recovered,
   diverged: a pose kept but not trusted, lost: no pose, absent: no pose, no camera sees a
   subject, two-subjects: no pose, two subjects or more in view), and the lists name the
   frames of the last five (`status_lists`) and those where a camera's silhouette touches
   its image border (`FrameResult.cut_by`: the subject partly out of its view; a flag, not
-  a status). Tracking starts at the first frame with a silhouette in some camera and one
-  subject in view; frames before it are absent or two-subjects;
+  a status) and those whose visual hull has a part the body leaves out
+  (`tracking.track.unexplained`; "unexplained_hull" is that part's share of the hull's
+  surface, null when not checked: a limb is likely misplaced; a flag, not a status).
+  Tracking starts at the first frame with a silhouette in some camera and one subject in
+  view; frames before it are absent or two-subjects;
 * ``tracks/motion.bvh``: the tracked frames on the body skeleton (`tracking.body.motion`); a
   BVH has no gaps, so a lost frame repeats the last tracked pose (pose.json says which);
 * ``tracks/subject.glb``: the subject's mesh (the body model's full resolution) skinned on
@@ -248,6 +252,7 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         "absent": [r.frame for r in results if r.status == "absent"],
         "two_subjects": [r.frame for r in results if r.status == "two-subjects"],
         "partly_out_of_view": [r.frame for r in results if r.cut_by],
+        "unexplained": [r.frame for r in results if r.unexplained],
         "diverged": [r.frame for r in results if r.status == "diverged"],
         "recovered": [r.frame for r in results if r.status == "recovered"],
         "events": {str(r.frame): r.event for r in results if r.event},
@@ -366,12 +371,14 @@ def _write_outputs(outputs: dict[str, Path], results: list[FrameResult], model: 
         "world_from_upright": world_from_upright.tolist(),
         **status_lists(results),
         "partly_out_of_view": [r.frame for r in results if r.cut_by],
+        "unexplained": [r.frame for r in results if r.unexplained],
         "frames": [{"frame": r.frame,
                     "params": None if r.pose is None else [float(v) for v in r.pose.params],
                     "energy_px": None if not np.isfinite(r.energy) else r.energy,
                     "xor_fraction": None if not np.isfinite(r.energy) else r.xor_fraction,
                     "event": r.event, "status": r.status,
-                    "partly_out_of_view": list(r.cut_by)} for r in results],
+                    "partly_out_of_view": list(r.cut_by),
+                    "unexplained_hull": r.unexplained_share} for r in results],
     })  # fmt: skip
     held: list[Pose] = []
     last = next(r.pose for r in results if r.pose is not None)
@@ -478,7 +485,15 @@ class _Recorder:
         text = f"{result.status}: {result.event}" if result.event else result.status
         if result.cut_by:
             text += f" (partly out of view of {', '.join(result.cut_by)})"
+        if result.unexplained:
+            level = "WARN"
+            text += (f" (the visual hull has a part the body leaves out, "
+                     f"{result.unexplained_share:.1%} of its surface: a limb is likely "
+                     "misplaced)")
         r.log_frame_text(self.rec, "track/status", text, level, result.frame, t)
+        if result.unexplained_share is not None:
+            r.log_frame_scalar(self.rec, "track/unexplained_hull", result.unexplained_share,
+                               result.frame, t)  # fmt: skip
         r.log_frame_scalar(self.rec, "track/status_index", STATUSES.index(result.status),
                            result.frame, t)  # fmt: skip
         if result.pose is None or tracker.model is None:

@@ -285,6 +285,18 @@ class TrackConfig:
         metadata={"help": "the relative bars are at least this fraction of the silhouette area "
                   "above that median"},
     )  # fmt: skip
+    max_unexplained_share: float = field(
+        default=0.005,
+        metadata={"help": "flag a tracked frame whose visual hull has a part the body leaves "
+                  "out (--unexplained-m or more from it, on silhouette pixels the body does "
+                  "not cover in 2 views or more) of over this share of the hull's surface: a "
+                  "limb likely misplaced; a flag in pose.json, the pose is kept (0 = off)"},
+    )  # fmt: skip
+    unexplained_m: float = field(
+        default=0.09,
+        metadata={"help": "distance from the body beyond which a part of the visual hull is "
+                  "unexplained, metres"},
+    )  # fmt: skip
     init_shape: bool = field(
         default=True,
         metadata={"help": "estimate the segment lengths at initialisation when the shape is "
@@ -356,11 +368,11 @@ class TrackConfig:
             if getattr(self, name) < low:
                 raise UserError(f"{flag(name)} must be >= {low}, got {getattr(self, name)}")
         for name in ("prior_weight", "twist_weight", "range_gain", "spike_xor_factor",
-                     "high_xor_factor", "xor_margin"):
+                     "high_xor_factor", "xor_margin", "max_unexplained_share"):
             if getattr(self, name) < 0:
                 raise UserError(f"{flag(name)} must be >= 0, got {getattr(self, name)}")
         for name in ("prior_scale_deg_s", "prior_scale_m_s", "twist_scale_deg",
-                     "max_xor_fraction", "voxel_m"):  # fmt: skip
+                     "max_xor_fraction", "voxel_m", "unexplained_m"):  # fmt: skip
             if not getattr(self, name) > 0:
                 raise UserError(f"{flag(name)} must be > 0, got {getattr(self, name)}")
         if not 0 <= self.min_range_deg_s <= self.max_range_deg_s:
@@ -405,6 +417,12 @@ class FrameResult:
     """Cameras whose silhouette touches the image border: the subject is partly out of their
     view (a flag, whatever the status: the tracker fits what the image shows, and the visual
     hull of a start keeps what is out of one view's image, `hull_min_views`)."""
+    unexplained_share: float | None = None
+    """`tracking.track.unexplained.unexplained_hull_share` of the frame's pose (None: not
+    checked: no pose, or the check is off)."""
+    unexplained: bool = False
+    """The share is over `TrackConfig.max_unexplained_share`: a part of the visual hull the
+    body leaves out, a limb likely misplaced (a flag, whatever the status)."""
 
     @property
     def xor_fraction(self) -> float:
@@ -960,7 +978,33 @@ class SilhouetteTracker:
         the cameras whose silhouette touches the image border (`FrameResult.cut_by`)."""
         result = self._track(frame, masks, init)
         cut = tuple(self.cameras[k].name for k in cut_by_border(masks))
-        return dataclasses.replace(result, cut_by=cut) if cut else result
+        if cut:
+            result = dataclasses.replace(result, cut_by=cut)
+        limit = self.config.max_unexplained_share
+        if result.pose is not None and limit > 0 and not self._starting:
+            share = self.unexplained_share(masks, result.pose)
+            result = dataclasses.replace(result, unexplained_share=share,
+                                         unexplained=share > limit)
+        return result
+
+    def unexplained_share(self, masks: Sequence[np.ndarray], pose: Pose) -> float:
+        """`tracking.track.unexplained.unexplained_hull_share` of `pose` on this frame's
+        silhouettes, at `TrackConfig.unexplained_m` (0 when the silhouettes have no hull)."""
+        from tracking.track.unexplained import unexplained_hull_share
+
+        assert self.model is not None
+        try:
+            points = self.visual_hull_points(masks)
+        except TrackingLost:  # an empty silhouette: nothing to check against
+            return 0.0
+        up = rig_up(self.cameras, points.mean(axis=0)) if len(points) else None
+        vertices = self.model.posed_vertices(pose)
+        model_masks = render_views(self.renderer, vertices, self.model.faces, self.cameras)
+        return unexplained_hull_share(
+            self.model, pose, self.cameras, masks, points, model_masks,
+            np.array([0.0, 1.0, 0.0]) if up is None else up, known=self.known,
+            vertices=vertices, distance_m=self.config.unexplained_m,
+            opening_m=self.config.voxel_m)
 
     def _track(self, frame: int, masks: Sequence[np.ndarray], init: Pose | None
                ) -> FrameResult:  # fmt: skip
