@@ -153,3 +153,25 @@ def test_fit_step_in_a_workspace_is_resumable(tmp_path):
     stamp = paths["json"].stat().st_mtime_ns
     again, _ = fit_workspace(ws, SubjectConfig(), SUPERQUADRIC)
     assert paths["json"].stat().st_mtime_ns == stamp and again["joints"] == summary["joints"]
+
+
+def test_a_twisted_root_keeps_the_chest_and_turns_the_hips():
+    """`twisted_root`, the start of the twisted-trunk fallback: from a trunk fit (turned,
+    tilted, the spine flexed), the spine twisted by -45 degrees leaves the chest's frame and
+    waist where they were and turns the pelvis by 45 degrees about the chest's up."""
+    from tracking.body.model import PARAM_INDEX, forward_kinematics
+    from tracking.fit.body_fit import _G, _H, _ROOT, twisted_root
+
+    x = np.zeros(N_POSE_PARAMS + 2)
+    x[_H], x[_G] = 1.75, 1.0
+    x[_ROOT] = [0.3, 0.9, -0.2, *np.deg2rad([20.0, -35.0, 110.0])]
+    x[PARAM_INDEX["spine_flex"]] = np.deg2rad(40.0)
+    y = twisted_root(x, np.deg2rad(-45.0))
+    shape = BodyShape.default(1.75)
+    before = forward_kinematics(Pose(x[:N_POSE_PARAMS]), shape)
+    after = forward_kinematics(Pose(y[:N_POSE_PARAMS]), shape)
+    spine, pelvis = NODE_NAMES.index("spine"), NODE_NAMES.index("pelvis")
+    np.testing.assert_allclose(after[spine], before[spine], atol=1e-9)  # frame and position
+    turn = before[pelvis, :3, :3].T @ after[pelvis, :3, :3]
+    assert np.rad2deg(np.arccos((np.trace(turn) - 1) / 2)) == pytest.approx(45.0, abs=1e-6)
+    assert np.rad2deg(y[PARAM_INDEX["spine_twist"]]) == pytest.approx(-45.0)
