@@ -1165,17 +1165,23 @@ def unexplained_cluster(points: np.ndarray, distances: np.ndarray, limit: float)
     forearm is under 4% of a body's points). Measured on mismatched mpfb subjects in CMU
     poses (5 mm noise, 30% hidden, `benchmarks/body_fit.py`): 0 for the right fits, which
     leave no point beyond the limit; 1.7% and 3.7% for two wrong forearms (boxing, squat)."""
+    return len(largest_far_group(points, distances, limit)) / len(points)
+
+
+def largest_far_group(points: np.ndarray, distances: np.ndarray, limit: float) -> np.ndarray:
+    """Indices into `points` of the largest group of those farther than `limit` from the body,
+    linked within 1.5 `limit` of each other (`unexplained_cluster`)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    far = points[distances > limit]
+    far = np.flatnonzero(distances > limit)
     if len(far) < 2:
-        return len(far) / len(points)
-    pairs = cKDTree(far).query_pairs(1.5 * limit, output_type="ndarray")
+        return far
+    pairs = cKDTree(points[far]).query_pairs(1.5 * limit, output_type="ndarray")
     links = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
                        shape=(len(far), len(far)))  # fmt: skip
     _, labels = connected_components(links, directed=False)
-    return float(np.bincount(labels).max() / len(points))
+    return far[labels == np.argmax(np.bincount(labels))]
 
 
 def mesh_distances(model: TrackedModel, pose: Pose, points: np.ndarray,

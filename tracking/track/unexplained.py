@@ -20,11 +20,13 @@ group of those that are
   views also has ghost volume the body does not fill, but the body covers its pixels in
   every view.
 
-A frame over ``TrackConfig.max_unexplained_share`` is flagged, not re-searched: a flag whatever
-the status, like a silhouette cut by the image border (a re-search would not mend the squat:
-the start search is what left its arm folded).
+A frame over ``TrackConfig.max_unexplained_share`` is mended when it can be
+(`SilhouetteTracker._mend_unexplained`: the two limbs whose roots are nearest the part are
+searched again over their whole range, without the twist prior on them, and a pose of lower
+XOR that leaves less out is kept), and flagged when it still is: a flag whatever the status,
+like a silhouette cut by the image border.
 
-Measured (session 22) on the tracked poses of two 15-clip suite runs of session 21
+The flag, measured (session 22) on the tracked poses of two 15-clip suite runs of session 21
 (`benchmarks/tracking_suite.py --frames 30`, synth's mismatched subject: the defaults, and
 ``--init-starts 3``), against each frame's worst joint, and on the Pose2Sim demo's 100 real
 frames (defaults, median IoU 0.811), with 9 cm and a 3 cm opening:
@@ -56,23 +58,31 @@ from recon.cameras import Camera
 from tracking.body.model import Pose
 
 
-def unexplained_hull_share(model: Any, pose: Pose, cameras: Sequence[Camera],
+def unexplained_hull_share(*args: Any, **kwargs: Any) -> float:
+    """The share of the hull's surface voxels in the largest group left out by the body
+    (`unexplained_hull_part`'s first value)."""
+    return unexplained_hull_part(*args, **kwargs)[0]
+
+
+def unexplained_hull_part(model: Any, pose: Pose, cameras: Sequence[Camera],
                            masks: Sequence[np.ndarray], hull_points: np.ndarray,
                            model_masks: Sequence[np.ndarray], up: np.ndarray, *,
                            vertices: np.ndarray | None = None,
                            known: Sequence[np.ndarray | None] | None = None,
                            distance_m: float, min_views: int = 2, floor_m: float = 0.10,
-                           opening_m: float = 0.0) -> float:  # fmt: skip
+                           opening_m: float = 0.0) -> tuple[float, np.ndarray]:  # fmt: skip
     """The share of `hull_points` (N, 3; the hull's surface voxels) in the largest group left
-    out by the body posed at `pose` (module docstring); `model_masks`: the body's silhouette
+    out by the body posed at `pose` (module docstring), and that group's points (M, 3);
+    `model_masks`: the body's silhouette
     in each camera at `pose`, full size; `up`: the world's up direction; `vertices`: the
     posed body's vertices when they are at hand."""
     import cv2
 
-    from tracking.fit.body_fit import mesh_distances, unexplained_cluster
+    from tracking.fit.body_fit import largest_far_group, mesh_distances
 
+    none = np.empty((0, 3))
     if len(hull_points) == 0:
-        return 0.0
+        return 0.0, none
     known = list(known) if known is not None else [None] * len(cameras)
     missed_in = np.zeros(len(hull_points), int)
     centre = hull_points.mean(axis=0)
@@ -98,7 +108,9 @@ def unexplained_hull_share(model: Any, pose: Pose, cameras: Sequence[Camera],
     height = hull_points @ up
     above = height > height.min() + floor_m
     if not above.any():
-        return 0.0
+        return 0.0, none
     distances = mesh_distances(model, pose, hull_points, vertices)
     distances = np.where(missed_in >= min_views, distances, 0.0)
-    return unexplained_cluster(hull_points[above], distances[above], distance_m)
+    group = hull_points[above][largest_far_group(hull_points[above], distances[above],
+                                                 distance_m)]
+    return len(group) / int(above.sum()), group
