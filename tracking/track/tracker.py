@@ -121,6 +121,9 @@ _ROOT = [PARAM_INDEX[n] for n in ("root_tx", "root_ty", "root_tz", "root_rz", "r
 _TRUNK = [PARAM_INDEX[n] for n in ("spine_flex", "neck_flex", "spine_bend", "spine_twist")]
 _TRUNK_STEPS = np.deg2rad([8.0, 8.0, 5.0, 8.0])
 _START_HELD = ADDED_PARAMS
+"""Held at 0 while the start is searched (the visual-hull fit, the competing starts, the shape
+pass) and freed for tracking: free there, they cost the Pose2Sim demo 0.734 -> 0.686 median
+IoU (another start won, a worse basin for the whole clip), session 17."""
 
 MEND_BACKOFF_FRAMES = 5
 """Frames after a mend that found nothing without another (`SilhouetteTracker._mend_unexplained`):
@@ -132,9 +135,7 @@ MEND_STARTS = 3
 has a part the body leaves out (`SilhouetteTracker._mend_unexplained`): the CMU squat's left
 forearm, held out and turned 62 degrees, is found from the folded start with both at 3, not
 with either alone (session 21)."""
-"""Held at 0 while the start is searched (the visual-hull fit, the competing starts, the shape
-pass) and freed for tracking: free there, they cost the Pose2Sim demo 0.734 -> 0.686 median
-IoU (another start won, a worse basin for the whole clip), session 17."""
+
 # Limb: (ball-joint parameters rz, rx, ry, hinge), its two end nodes and the torso clearance
 # as a fraction of the shape's chest half width (arms) or hip half width (legs).
 _LIMBS: dict[str, tuple[list[int], tuple[str, str], str]] = {
@@ -299,10 +300,11 @@ class TrackConfig:
     )  # fmt: skip
     max_unexplained_share: float = field(
         default=0.005,
-        metadata={"help": "flag a tracked frame whose visual hull has a part the body leaves "
-                  "out (--unexplained-m or more from it, on silhouette pixels the body does "
-                  "not cover in 2 views or more) of over this share of the hull's surface: a "
-                  "limb likely misplaced; a flag in pose.json, the pose is kept (0 = off)"},
+        metadata={"help": "a tracked frame whose visual hull has a part the body leaves out "
+                  "(--unexplained-m or more from it, on silhouette pixels the body does not "
+                  "cover in 2 views or more) of over this share of the hull's surface voxels: "
+                  "a limb likely misplaced; searched again (--mend-unexplained), then, if "
+                  "still over, flagged in pose.json, its pose kept (0 = off)"},
     )  # fmt: skip
     unexplained_m: float = field(
         default=0.09,
@@ -558,7 +560,7 @@ class SilhouetteTracker:
         self.shape_frames_used: list[int] = []  # `calibrate_shape`'s frames (indices)
         # (the frame's energy, level, its outline refiner): built once per frame and level
         self._refiner: tuple[SilhouetteEnergy, int, ContourRefiner] | None = None
-        self._part: tuple[tuple, tuple[float, np.ndarray]] | None = None  # unexplained_part's
+        self._part: tuple[object, bytes, tuple[float, np.ndarray]] | None = None  # its last
         self._mend_failed_at: int | None = None  # the frame of the last mend that found nothing
         self.evaluations = 0
         # How `calibrate_shape` found the pose it returns: the first tracked frame starts from
@@ -1019,9 +1021,9 @@ class SilhouetteTracker:
         from tracking.track.unexplained import unexplained_hull_part
 
         assert self.model is not None
-        key = (id(masks), pose.params.tobytes())
-        if self._part is not None and self._part[0] == key:
-            return self._part[1]
+        key = pose.params.tobytes()
+        if self._part is not None and self._part[0] is masks and self._part[1] == key:
+            return self._part[2]
         try:
             points = self.visual_hull_points(masks)
         except TrackingLost:  # an empty silhouette: nothing to check against
@@ -1034,7 +1036,7 @@ class SilhouetteTracker:
             np.array([0.0, 1.0, 0.0]) if up is None else up, known=self.known,
             vertices=vertices, distance_m=self.config.unexplained_m,
             opening_m=self.config.voxel_m)
-        self._part = (key, part)
+        self._part = (masks, key, part)  # the masks held: their id is not reused meanwhile
         return part
 
     def _mend_unexplained(self, energy: SilhouetteEnergy, masks: Sequence[np.ndarray],
