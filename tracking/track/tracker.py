@@ -438,8 +438,9 @@ class FrameResult:
     view (a flag, whatever the status: the tracker fits what the image shows, and the visual
     hull of a start keeps what is out of one view's image, `hull_min_views`)."""
     unexplained_share: float | None = None
-    """`tracking.track.unexplained.unexplained_hull_share` of the frame's pose (None: not
-    checked: no pose, or the check is off)."""
+    """The share of the visual hull the frame's pose leaves out
+    (`tracking.track.unexplained.unexplained_hull_part`; None: not checked: no pose, or the
+    check is off)."""
     unexplained: bool = False
     """The share is over `TrackConfig.max_unexplained_share`: a part of the visual hull the
     body leaves out, a limb likely misplaced (a flag, whatever the status)."""
@@ -561,6 +562,7 @@ class SilhouetteTracker:
         # (the frame's energy, level, its outline refiner): built once per frame and level
         self._refiner: tuple[SilhouetteEnergy, int, ContourRefiner] | None = None
         self._part: tuple[object, bytes, tuple[float, np.ndarray]] | None = None  # its last
+        self._hull: tuple[object, np.ndarray, np.ndarray] | None = None  # (masks, points, up)
         self._mend_failed_at: int | None = None  # the frame of the last mend that found nothing
         self.evaluations = 0
         # How `calibrate_shape` found the pose it returns: the first tracked frame starts from
@@ -1010,33 +1012,40 @@ class SilhouetteTracker:
         return result
 
     def unexplained_share(self, masks: Sequence[np.ndarray], pose: Pose) -> float:
-        """`tracking.track.unexplained.unexplained_hull_share` of `pose` on this frame's
-        silhouettes, at `TrackConfig.unexplained_m` (0 when the silhouettes have no hull)."""
+        """The share of this frame's visual hull that `pose` leaves out
+        (`tracking.track.unexplained.unexplained_hull_part`, at `TrackConfig.unexplained_m`; 0
+        when the silhouettes have no hull)."""
         return self.unexplained_part(masks, pose)[0]
 
     def unexplained_part(self, masks: Sequence[np.ndarray], pose: Pose
                          ) -> tuple[float, np.ndarray]:  # fmt: skip
-        """`unexplained_share` and the points of that part of the hull (M, 3); the last
-        answer is kept, for the same masks and pose."""
+        """`unexplained_share` and the points of that part of the hull (M, 3). The frame's
+        hull is carved once for all the poses checked on the same masks (a mend checks up to
+        four), and the last answer is kept for the same masks and pose."""
         from tracking.track.unexplained import unexplained_hull_part
 
         assert self.model is not None
         key = pose.params.tobytes()
         if self._part is not None and self._part[0] is masks and self._part[1] == key:
             return self._part[2]
-        try:
-            points = self.visual_hull_points(masks)
-        except TrackingLost:  # an empty silhouette: nothing to check against
+        if self._hull is None or self._hull[0] is not masks:
+            try:
+                points = self.visual_hull_points(masks)
+            except TrackingLost:  # an empty silhouette: nothing to check against
+                points = np.empty((0, 3))
+            up = rig_up(self.cameras, points.mean(axis=0)) if len(points) else None
+            # The masks held: their id is not reused while they are the key.
+            self._hull = (masks, points, np.array([0.0, 1.0, 0.0]) if up is None else up)
+        _, points, up = self._hull
+        if not len(points):
             return 0.0, np.empty((0, 3))
-        up = rig_up(self.cameras, points.mean(axis=0)) if len(points) else None
         vertices = self.model.posed_vertices(pose)
         model_masks = render_views(self.renderer, vertices, self.model.faces, self.cameras)
         part = unexplained_hull_part(
-            self.model, pose, self.cameras, masks, points, model_masks,
-            np.array([0.0, 1.0, 0.0]) if up is None else up, known=self.known,
+            self.model, pose, self.cameras, masks, points, model_masks, up, known=self.known,
             vertices=vertices, distance_m=self.config.unexplained_m,
             opening_m=self.config.voxel_m)
-        self._part = (masks, key, part)  # the masks held: their id is not reused meanwhile
+        self._part = (masks, key, part)
         return part
 
     def _mend_unexplained(self, energy: SilhouetteEnergy, masks: Sequence[np.ndarray],

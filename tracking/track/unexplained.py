@@ -8,7 +8,7 @@ an XOR no higher than the right frames of other clips. Its silhouettes still sho
 the visual hull has a forearm-sized part far from the tracked body, and the model leaves that
 part's pixels uncovered in the views that see it.
 
-`unexplained_hull_share` is the share of the hull's surface voxels in the largest connected
+`unexplained_hull_part` gives the share of the hull's surface voxels in the largest connected
 group of those that are
 
 * farther than ``distance_m`` from the posed body's surface,
@@ -58,12 +58,6 @@ from recon.cameras import Camera
 from tracking.body.model import Pose
 
 
-def unexplained_hull_share(*args: Any, **kwargs: Any) -> float:
-    """The share of the hull's surface voxels in the largest group left out by the body
-    (`unexplained_hull_part`'s first value)."""
-    return unexplained_hull_part(*args, **kwargs)[0]
-
-
 def unexplained_hull_part(model: Any, pose: Pose, cameras: Sequence[Camera],
                            masks: Sequence[np.ndarray], hull_points: np.ndarray,
                            model_masks: Sequence[np.ndarray], up: np.ndarray, *,
@@ -73,12 +67,12 @@ def unexplained_hull_part(model: Any, pose: Pose, cameras: Sequence[Camera],
                            opening_m: float = 0.0) -> tuple[float, np.ndarray]:  # fmt: skip
     """The share of `hull_points` (N, 3; the hull's surface voxels) in the largest group left
     out by the body posed at `pose` (module docstring), and that group's points (M, 3);
-    `model_masks`: the body's silhouette
-    in each camera at `pose`, full size; `up`: the world's up direction; `vertices`: the
-    posed body's vertices when they are at hand."""
+    `model_masks`: the body's silhouette in each camera at `pose`, full size; `up`: the
+    world's up direction; `vertices`: the posed body's vertices when they are at hand."""
     import cv2
 
     from tracking.fit.body_fit import largest_far_group, mesh_distances
+    from tracking.silhouettes.hull import project_voxels
 
     none = np.empty((0, 3))
     if len(hull_points) == 0:
@@ -97,20 +91,17 @@ def unexplained_hull_part(model: Any, pose: Pose, cameras: Sequence[Camera],
         size = max(3, int(round(pixels)))
         kernel = np.ones((size, size), np.uint8)
         missed = cv2.morphologyEx(missed.astype(np.uint8), cv2.MORPH_OPEN, kernel) > 0
-        uv, depth = camera.project(hull_points)
-        with np.errstate(invalid="ignore"):
-            col, row = np.floor(uv[:, 0]), np.floor(uv[:, 1])
-        inside = (np.isfinite(col) & np.isfinite(row) & (depth > 0) & (col >= 0)
-                  & (col < camera.width) & (row >= 0) & (row < camera.height))
-        hit = np.zeros(len(hull_points), bool)
-        hit[inside] = missed[row[inside].astype(int), col[inside].astype(int)]
-        missed_in += hit
+        seen = project_voxels(camera, hull_points)
+        missed_in += seen.seen & missed[seen.row, seen.col]
     height = hull_points @ up
     above = height > height.min() + floor_m
     if not above.any():
         return 0.0, none
-    distances = mesh_distances(model, pose, hull_points, vertices)
-    distances = np.where(missed_in >= min_views, distances, 0.0)
-    group = hull_points[above][largest_far_group(hull_points[above], distances[above],
-                                                 distance_m)]
-    return len(group) / int(above.sum()), group
+    points = hull_points[above]
+    # Only the voxels missed in enough views can be in the part: the others' distance is 0.
+    candidates = missed_in[above] >= min_views
+    distances = np.zeros(len(points))
+    if candidates.any():
+        distances[candidates] = mesh_distances(model, pose, points[candidates], vertices)
+    group = points[largest_far_group(points, distances, distance_m)]
+    return len(group) / len(points), group
