@@ -64,6 +64,35 @@ def known_iou(a: np.ndarray, b: np.ndarray, known: np.ndarray | None) -> float:
     return iou(a, b) if known is None else iou(a & known, b & known)
 
 
+class XorCount:
+    """XOR pixels, in full-resolution pixels, between image silhouettes and ``static`` (masks
+    drawn once: the parts of a body a stage does not move, or None for nothing) with a mesh
+    drawn over it, counted without drawing the mesh: the XOR of ``static`` alone plus, over
+    the pixels the mesh covers that ``static`` does not, +1 outside the image silhouette and
+    -1 inside (`tracking.track.render.covered_gains`); unknown pixels count 0. The same
+    integers as counting ``(static | mesh) ^ image`` over the known pixels."""
+
+    def __init__(self, renderer: Any, cameras: Sequence[Camera], masks: Sequence[np.ndarray],
+                 known: Sequence[np.ndarray | None],
+                 static: Sequence[np.ndarray] | None = None) -> None:  # fmt: skip
+        self.renderer, self.cameras = renderer, cameras
+        static = static or [np.zeros_like(m) for m in masks]
+        self.base = np.array([np.count_nonzero(counted(s ^ m, k))
+                              for s, m, k in zip(static, masks, known, strict=True)])  # fmt: skip
+        self.gains = []
+        for s, m, k in zip(static, masks, known, strict=True):
+            free = ~s if k is None else ~s & k
+            self.gains.append(np.where(free, np.where(m, -1, 1), 0).astype(np.int8))
+        self.stamps = [np.zeros(m.shape, np.int64) for m in masks]
+
+    def counts(self, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+        """(views,) XOR pixel counts (each view's own pixels) with the mesh drawn."""
+        from tracking.track.render import covered_gains
+
+        return self.base + covered_gains(self.renderer, vertices, faces, self.cameras,
+                                         self.gains, self.stamps)  # fmt: skip
+
+
 class SilhouetteEnergy:
     """XOR energy of a body pose against foreground masks seen by calibrated cameras.
 
@@ -118,6 +147,9 @@ class SilhouetteEnergy:
             self._pixel_area.append(np.array([
                 (c0.width * c0.height) / (c.width * c.height)
                 for c0, c in zip(cameras, level_cameras, strict=True)]))
+        # Per level, the XOR counter of `per_view`, made on its first use (shared by
+        # `with_model`'s copies: the masks are the same).
+        self._counts: list[XorCount | None] = [None] * levels
 
     def with_model(self, model: BodyModel) -> SilhouetteEnergy:
         """The same cameras and mask pyramid (shared, not rebuilt) for another body model."""
@@ -144,9 +176,14 @@ class SilhouetteEnergy:
                     strict=True)]  # fmt: skip
 
     def per_view(self, pose: Pose, level: int = 0) -> np.ndarray:
-        """(views,) XOR pixel counts at ``level``, in full-resolution pixels."""
-        counts = np.array([np.count_nonzero(x) for x in self.xor_masks(pose, level)], float)
-        return counts * self._pixel_area[level]
+        """(views,) XOR pixel counts at ``level``, in full-resolution pixels (`xor_masks`'
+        pixels, counted by `XorCount` without drawing the model)."""
+        self._check_level(level)
+        if self._counts[level] is None:
+            self._counts[level] = XorCount(self.renderer, self.cameras[level], self.masks[level],
+                                           self.known[level])  # fmt: skip
+        counts = self._counts[level].counts(self.model.posed_vertices(pose), self.model.faces)
+        return counts.astype(float) * self._pixel_area[level]
 
     def __call__(self, pose: Pose, level: int = 0) -> float:
         """Sum over views of the XOR pixel count at ``level``, in full-resolution pixels."""

@@ -54,7 +54,19 @@ def fill_triangles(uv: np.ndarray, faces: np.ndarray, mask: np.ndarray, keep_win
     """Scanline fill (compiled): set every pixel of `mask` whose centre lies in a triangle.
     keep_winding: 0 fills every triangle; +1 or -1 only those whose signed area in the image
     has that sign (back-face culling done in the image, where it costs nothing)."""
-    height, width = mask.shape
+    _scan(uv, faces, keep_winding, mask, np.zeros((0, 0), np.int8), np.zeros((0, 0), np.int64), 0)
+
+
+@numba.njit(cache=True, nogil=True)
+def _scan(uv: np.ndarray, faces: np.ndarray, keep_winding: float, mask: np.ndarray,
+          gain: np.ndarray, stamp: np.ndarray, token: int) -> int:  # fmt: skip
+    """The scanline fill of `fill_triangles` and `covered_gain`: with an empty `gain`, sets
+    `mask` at every covered pixel centre; else returns the sum of `gain` over the covered
+    pixels, each counted once (`stamp` set to `token` where counted; `mask` unused)."""
+    counting = gain.shape[0] > 0
+    height, width = (gain.shape[0], gain.shape[1]) if counting else (mask.shape[0],
+                                                                       mask.shape[1])
+    total = 0
     for f in range(faces.shape[0]):
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
         ax, ay, bx, by, cx, cy = uv[a, 0], uv[a, 1], uv[b, 0], uv[b, 1], uv[c, 0], uv[c, 1]
@@ -89,8 +101,15 @@ def fill_triangles(uv: np.ndarray, faces: np.ndarray, mask: np.ndarray, keep_win
             x_short = tx + (yc - ty) * k_top if yc < my else mx + (yc - my) * k_bottom
             i0 = max(np.ceil(min(x_long, x_short) - 0.5), 0.0)
             i1 = min(np.floor(max(x_long, x_short) - 0.5), width - 1.0)
-            for col in range(int(i0), int(i1) + 1):
-                mask[row, col] = True
+            if counting:
+                for col in range(int(i0), int(i1) + 1):
+                    if stamp[row, col] != token:
+                        stamp[row, col] = token
+                        total += gain[row, col]
+            else:
+                for col in range(int(i0), int(i1) + 1):
+                    mask[row, col] = True
+    return total
 
 
 @numba.njit(cache=True, nogil=True)
@@ -101,3 +120,16 @@ def render_mask(vertices: np.ndarray, faces: np.ndarray, cam_from_world: np.ndar
     uv = np.empty((vertices.shape[0], 2))
     project_vertices(vertices, cam_from_world, K, dist, near_m, max_radius2, uv)
     fill_triangles(uv, faces, mask, keep_winding)
+
+
+@numba.njit(cache=True, nogil=True)
+def covered_gain(vertices: np.ndarray, faces: np.ndarray, cam_from_world: np.ndarray,
+                 K: np.ndarray, dist: np.ndarray, near_m: float, max_radius2: float,
+                 keep_winding: float, gain: np.ndarray, stamp: np.ndarray, token: int,
+                 ) -> int:  # fmt: skip
+    """`render_mask`'s pixels, not drawn but summed: `gain` (an (H, W) int8 image) over the
+    pixels the triangles cover, each once (`stamp`, an (H, W) int64 image, is set to `token`
+    where counted: a token not in it yet starts a new count, so nothing is cleared)."""
+    uv = np.empty((vertices.shape[0], 2))
+    project_vertices(vertices, cam_from_world, K, dist, near_m, max_radius2, uv)
+    return _scan(uv, faces, keep_winding, np.zeros((0, 0), np.bool_), gain, stamp, token)

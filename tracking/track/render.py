@@ -26,6 +26,7 @@ distortion is honoured through :class:`~tracking.rig.cameras.Camera`.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
 import subprocess
 import sys
@@ -143,6 +144,32 @@ def render_views(renderer: Any, vertices_in_world: Any, faces: Any,
         return renderer.render_views(vertices_in_world, faces, cameras)
     return [np.asarray(renderer.render(vertices_in_world, faces, c), dtype=bool)
             for c in cameras]  # fmt: skip
+
+
+_TOKENS = itertools.count(1)
+"""`covered_gains`' count tokens: one per call, never reused (the stamps need no clearing)."""
+
+
+def covered_gains(renderer: Any, vertices_in_world: Any, faces: Any, cameras: Sequence[Camera],
+                  gains: Sequence[np.ndarray], stamps: Sequence[np.ndarray]) -> np.ndarray:
+    """(views,) int: per camera, the sum of ``gains[view]`` ((H, W) int8) over the pixels the
+    mesh covers in that view: what the XOR of a silhouette changes by when the mesh is drawn
+    into it (`tracking.track.energy.XorCount`). ``cpu-raster`` sums while it scans, drawing no
+    mask (``stamps[view]``: an (H, W) int64 scratch image, each pixel counted once); any other
+    renderer draws its masks (`render_views`) and they are summed."""
+    if not isinstance(renderer, CpuRasterRenderer):
+        return np.array([int(gain[mask].sum()) for gain, mask in zip(
+            gains, render_views(renderer, vertices_in_world, faces, cameras), strict=True)])
+    from tracking.track.raster import covered_gain
+
+    vertices, tris = _check_mesh(vertices_in_world, faces)
+    vertices = np.ascontiguousarray(vertices)
+    winding = -1.0 if renderer.options.cull_back_faces else 0.0
+    token = next(_TOKENS)
+    return np.array([covered_gain(vertices, tris, camera.cam_from_world, camera.K, camera.dist,
+                                  renderer.options.near_m, camera.max_radius2, winding, gain,
+                                  stamp, token) if len(tris) else 0
+                     for camera, gain, stamp in zip(cameras, gains, stamps, strict=True)])
 
 
 # ---------------------------------------------------------------------------------------------

@@ -112,7 +112,7 @@ from tracking.silhouettes.hull import (
 )
 from tracking.track.contour import ContourConfig, ContourRefiner, refine_shape
 from tracking.track.divergence import WatchConfig, XorWatch
-from tracking.track.energy import SilhouetteEnergy, counted
+from tracking.track.energy import SilhouetteEnergy, XorCount, counted
 from tracking.track.render import render_views
 
 _ROOT = [PARAM_INDEX[n] for n in ("root_tx", "root_ty", "root_tz", "root_rz", "root_rx",
@@ -467,15 +467,18 @@ class _StageEnergy:
         moving = model.faces_moved_by(moved_nodes)
         self.faces = model.faces[moving]
         self.cameras = energy.cameras[level]
-        self.masks = energy.masks[level]
-        self.known = energy.known[level]
         static_faces = model.faces[~moving]
         vertices = model.posed_vertices(Pose(self.base))
-        self.static = (
+        static = (
             render_views(energy.renderer, vertices, static_faces, self.cameras)
             if len(static_faces)
-            else [np.zeros((cam.height, cam.width), bool) for cam in self.cameras]
+            else None
         )
+        self.count = XorCount(energy.renderer, self.cameras, energy.masks[level],
+                              energy.known[level], static)  # fmt: skip
+        # Only the vertices of the moving faces are drawn (and projected).
+        self.vertex_ids = np.unique(self.faces)
+        self.local_faces = np.searchsorted(self.vertex_ids, self.faces)
         self.pixel_area = energy._pixel_area[level]
         self.evaluations = 0
 
@@ -486,16 +489,15 @@ class _StageEnergy:
 
     def __call__(self, values: np.ndarray) -> float:
         self.evaluations += 1
-        vertices = self.energy.model.posed_vertices(Pose(self.params(values)))
-        moving = render_views(self.energy.renderer, vertices, self.faces, self.cameras)
+        x = self.params(values)
+        vertices = self.energy.model.posed_vertices(Pose(x))[self.vertex_ids]
+        counts = self.count.counts(vertices, self.local_faces)
         total = 0.0
         if self.prior is not None:
             centre, weight = self.prior
-            x = self.params(values)
             total += float(np.sum(weight[self.free] * (x[self.free] - centre[self.free]) ** 2))
-        for static, part, mask, known, area in zip(self.static, moving, self.masks, self.known,
-                                                   self.pixel_area, strict=True):  # fmt: skip
-            total += area * np.count_nonzero(counted((static | part) ^ mask, known))
+        for area, count in zip(self.pixel_area, counts, strict=True):
+            total += area * count
         return total
 
 
@@ -849,10 +851,11 @@ class SilhouetteTracker:
             samples[:, grid_axes] += mesh * half[grid_axes]
         samples = np.clip(samples, LOWER_LIMITS[params], UPPER_LIMITS[params])
         scored = [(stage(x[params]), 0, x[params])]
+        valid = self._valid(np.array([stage.params(v) for v in samples]), ends, kind, energy,
+                            level)  # fmt: skip
         for k, values in enumerate(samples, 1):
-            if not self._valid(stage.params(values), ends, kind, energy, level):
-                continue
-            scored.append((stage(values), k, values))
+            if valid[k - 1]:
+                scored.append((stage(values), k, values))
         scored.sort(key=lambda item: item[:2])
         steps = np.maximum(half / max(cfg.grid - 1, 1), np.deg2rad(3.0))
         # With `init_starts` > 1, the best few samples each start a simplex (at
@@ -884,30 +887,34 @@ class SilhouetteTracker:
         self.evaluations += stage.evaluations
         return stage.params(values)
 
-    def _valid(self, x: np.ndarray, ends: tuple[str, str], kind: str,
-               energy: SilhouetteEnergy, level: int) -> bool:  # fmt: skip
-        """Thesis 6.2.5's sample test: the limb's two end nodes lie inside the (dilated)
-        silhouette in every view and away from the torso axis."""
+    def _valid(self, xs: np.ndarray, ends: tuple[str, str], kind: str,
+               energy: SilhouetteEnergy, level: int) -> np.ndarray:  # fmt: skip
+        """Thesis 6.2.5's sample test, (N,) bool for the (N, P) poses `xs`: the limb's two end
+        nodes lie inside the (dilated) silhouette in every view and away from the torso
+        axis."""
         assert self.shape is not None
-        world = forward_kinematics(Pose(x), self.shape)
-        pelvis, neck = world[NODE_INDEX["pelvis"], :3, 3], world[NODE_INDEX["neck"], :3, 3]
-        axis = (neck - pelvis) / max(np.linalg.norm(neck - pelvis), 1e-9)
+        nodes = [NODE_INDEX[n] for n in ("pelvis", "neck", *ends)]
+        # (N, 4, 3): pelvis, neck and the two ends of each pose.
+        world = np.array([forward_kinematics(Pose(x), self.shape)[nodes, :3, 3] for x in xs])
+        world = world.reshape(len(xs), len(nodes), 3)
+        pelvis, neck, points = world[:, 0], world[:, 1], world[:, 2:]
+        axis = neck - pelvis
+        axis /= np.maximum(np.linalg.norm(axis, axis=1), 1e-9)[:, None]
         clearance = (0.5 * self.shape.chest_half_width if kind == "arm"
                      else 0.3 * self.shape.hip_half_width)  # fmt: skip
-        points = np.array([world[NODE_INDEX[n], :3, 3] for n in ends])
-        off_axis = points - pelvis - np.outer((points - pelvis) @ axis, axis)
-        if np.any(np.linalg.norm(off_axis, axis=1) < clearance):
-            return False
+        from_pelvis = points - pelvis[:, None]
+        along = np.einsum("nkj,nj->nk", from_pelvis, axis)
+        off_axis = from_pelvis - along[..., None] * axis[:, None]
+        valid = (np.linalg.norm(off_axis, axis=2) >= clearance).all(axis=1)
         for cam, mask in zip(energy.cameras[level], self._dilated[level], strict=True):
-            uv, depth = cam.project(points)
+            uv, depth = cam.project(points.reshape(-1, 3))
             col, row = np.floor(uv[:, 0]), np.floor(uv[:, 1])
-            if np.any(~np.isfinite(col)) or np.any(depth <= 0):
-                return False
-            col, row = col.astype(int), row.astype(int)
-            inside = (col >= 0) & (col < cam.width) & (row >= 0) & (row < cam.height)
-            if not inside.all() or not mask[row, col].all():
-                return False
-        return True
+            seen = np.isfinite(col) & np.isfinite(row) & (depth > 0)
+            seen &= (col >= 0) & (col < cam.width) & (row >= 0) & (row < cam.height)
+            inside = np.zeros(len(col), bool)
+            inside[seen] = mask[row[seen].astype(int), col[seen].astype(int)]
+            valid &= inside.reshape(len(xs), -1).all(axis=1)
+        return valid
 
     def _refine_all(self, energy: SilhouetteEnergy, x: np.ndarray, init: bool = False,
                     change: np.ndarray | None = None) -> np.ndarray:  # fmt: skip

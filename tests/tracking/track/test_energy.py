@@ -10,7 +10,7 @@ import pytest
 
 from tracking.body.model import BodyModel, BodyShape, Pose
 from tracking.rig.cameras import ring_cameras
-from tracking.track.energy import SilhouetteEnergy, downsample_mask, iou
+from tracking.track.energy import SilhouetteEnergy, XorCount, downsample_mask, iou
 from tracking.track.render import CpuRasterRenderer
 
 TRUE_POSE = {"l_shoulder_rz": 0.3, "r_knee_flex": 0.5, "r_hip_rx": -0.4, "root_ry": 0.3}
@@ -142,3 +142,36 @@ def test_unknown_pixels_count_in_no_xor():
     assert part.per_view(pose, 0)[1] == full.per_view(pose, 0)[1]
     assert part.known[1][0].shape == (60, 80) and part.known[1][1] is None
     assert part(pose, 1) < full(pose, 1)
+
+
+@pytest.mark.parametrize("renderer_name", ["cpu-raster", "open3d-raycast"])
+def test_the_xor_counted_without_drawing_equals_the_drawn_xor(setup, renderer_name):
+    """`XorCount` (the mesh's covered pixels summed, not drawn: what the energy and the
+    tracker's stages count) gives the integers of the drawn masks' XOR, with a static part
+    and unknown pixels, pose after pose (its stamps are reused, never cleared), for the
+    compiled renderer and for one that draws."""
+    from plugins.registry import create
+
+    model, cameras, masks, _, truth = setup
+    renderer = create("renderer", renderer_name)
+    rng = np.random.default_rng(3)
+    known = [rng.random(m.shape) > 0.1 for m in masks]
+    moving = model.faces_moved_by(np.isin(np.arange(16), [8, 9, 10]))  # some limb's nodes
+    assert 0 < moving.sum() < len(model.faces)
+    static = [renderer.render(model.posed_vertices(truth), model.faces[~moving], c)
+              for c in cameras]  # fmt: skip
+    count = XorCount(renderer, cameras, masks, known, static)
+    for k in range(4):
+        pose = Pose(truth.params + rng.normal(0.0, 0.15, truth.params.shape) * (k > 0))
+        vertices = model.posed_vertices(pose)
+        drawn = [renderer.render(vertices, model.faces[moving], c) for c in cameras]
+        expected = [np.count_nonzero(((s | d) ^ m) & kn)
+                    for s, d, m, kn in zip(static, drawn, masks, known, strict=True)]  # fmt: skip
+        assert count.counts(vertices, model.faces[moving]).tolist() == expected
+    # The energy's own count (no static part) is its drawn XOR masks' count.
+    energy = SilhouetteEnergy(model, cameras, masks, renderer, levels=2, known=known)
+    for level in (0, 1):
+        drawn = [np.count_nonzero(x) for x in energy.xor_masks(_arm_raised_by(20), level)]
+        assert np.array_equal(energy.per_view(_arm_raised_by(20), level),
+                              np.array(drawn) * energy._pixel_area[level])
+        assert sum(drawn) > 0

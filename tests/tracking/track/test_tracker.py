@@ -344,3 +344,21 @@ def test_pixels_of_unknown_background_are_left_out():
     hull = tracker.visual_hull_points(corrupted(truth[0]))
     body = MODEL.posed_vertices(truth[0])
     assert np.ptp(hull[:, 1]) > np.ptp(body[:, 1]) - 0.1
+
+
+def test_limb_samples_must_end_inside_every_silhouette_and_off_the_trunk():
+    """Thesis 6.2.5's sample test (`_valid`), many samples at once: a sample whose hand ends
+    inside every (dilated) silhouette and off the torso axis passes; one whose hand leaves a
+    silhouette, or ends on the torso axis, does not."""
+    truth = _walk(1)[0]
+    tracker = SilhouetteTracker(CAMERAS, SUPERQUADRIC, shape=SHAPE)
+    energy = tracker._energy(_masks(truth))
+    tracker._refine_all(energy, truth.params.copy())  # sets the dilated silhouettes
+    out = truth.params.copy()  # the arm raised sideways, out of the silhouettes
+    out[PARAM_INDEX["l_shoulder_rz"]] = 1.5
+    across = truth.params.copy()  # the hand drawn onto the torso axis
+    across[PARAM_INDEX["l_shoulder_rz"]] = -0.8
+    across[PARAM_INDEX["l_elbow_flex"]] = 2.4
+    ends = ("l_elbow", "l_wrist")
+    valid = tracker._valid(np.array([truth.params, out, across]), ends, "arm", energy, 1)
+    assert valid.tolist() == [True, False, False]
