@@ -26,7 +26,9 @@ followed by a ``recovered`` frame within 5 frames (a lost or diverged frame near
 end counts as unrecovered); the frames flagged unexplained (`tracking.track.unexplained`: a
 part of the visual hull the body leaves out); frames tracked more than 100 mm off (MPJPE),
 and those of them that no status and no flag shows (``unfl``: confidently wrong); frames per
-second over the clip (start-up, shape pass and tracking).
+second over the clip (start-up, shape pass and tracking), and apart: the seconds of the start
+and the shape pass, once per clip (``start s``), and the frames per second of the tracking
+after them (``then/s``).
 
 Targets (issue 20, the current tracker): mean MPJPE over the suite <= 30 mm, no clip above
 50 mm, no frame lost without recovery within 5 frames, >= 1 frame/s.
@@ -192,7 +194,8 @@ def main() -> None:
                 cases[clip, name] = case
     print(f"\n{args.frames} frames per clip, {args.size}\n{'clip / tracker':<30}{'MPJPE':>8}"
           f"{'offsets out':>13}  {'worst joint':<22}{'lost':>5}{'div':>5}{'rec':>5}"
-          f"{'unrec':>6}{'flag':>5}{'off':>5}{'unfl':>5}{'frames/s':>10}")  # fmt: skip
+          f"{'unrec':>6}{'flag':>5}{'off':>5}{'unfl':>5}{'frames/s':>10}{'start s':>9}"
+          f"{'then/s':>8}")  # fmt: skip
     for c in cases.values():
         count = {s: sum(v == s for v in c.status.values()) for s in ("lost", "diverged",
                                                                     "recovered")}  # fmt: skip
@@ -201,7 +204,8 @@ def main() -> None:
               f"{count['lost']:>5}{count['diverged']:>5}{count['recovered']:>5}"
               f"{len(unrecovered(c.status)):>6}{len(c.unexplained):>5}"
               f"{sum(e > OFF_MM for e in c.per_frame_mm.values()):>5}"
-              f"{len(unflagged_off(c)):>5}{c.fps:>10.2f}")  # fmt: skip
+              f"{len(unflagged_off(c)):>5}{c.fps:>10.2f}{c.shape_pass_s:>9.0f}"
+              f"{c.tracking_fps:>8.2f}")  # fmt: skip
     for c in cases.values():
         events = {f: s for f, s in c.status.items() if s not in ("tracked", "init")}
         if events or c.lost:

@@ -112,6 +112,10 @@ class Case:
     """MPJPE of each frame with a pose."""
     unexplained: list[int] = field(default_factory=list)
     """The frames pose.json flags as unexplained (`tracking.track.unexplained`)."""
+    shape_pass_s: float = 0.0
+    """Seconds of the start and the shape pass, once per clip (in `fps`)."""
+    tracking_fps: float = 0.0
+    """Frames per second of the tracking after them."""
 
     @property
     def worst_joint(self) -> str:
@@ -151,7 +155,8 @@ def track_case(ws: Path, label: str, tracker: list[str], frames: int | None) -> 
                 len(scored) / seconds, run["evaluations_per_frame"] * len(scored) / seconds,
                 run["evaluations_per_frame"], run["median_xor_fraction"],
                 {e["frame"]: e.get("status", "?") for e in pose["frames"]}, per_frame,
-                pose.get("unexplained", []))  # fmt: skip
+                pose.get("unexplained", []), run["shape_pass_seconds"],
+                1.0 / run["tracking_seconds_per_frame"])  # fmt: skip
 
 
 SUBJECTS: tuple[tuple[str, Path, list[str]], ...] = (

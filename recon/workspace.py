@@ -748,6 +748,9 @@ class Workspace:
 
 
 class Timer:
+    seconds: float = 0.0
+    """The block's wall time once it has run (0 before)."""
+
     def __enter__(self) -> Timer:
         self.start = time.perf_counter()
         return self

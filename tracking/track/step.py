@@ -219,13 +219,15 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
 
     logged = {frames[i] for i in np.unique(np.linspace(
         0, len(frames) - 1, min(step.logged_images, len(frames))).round().astype(int))}
+    shape_pass = Timer()  # its seconds stay 0 without a shape pass
     with Timer() as timer, _Recorder(ws, upright, frame_rate, logged) as recorder:
         if init_model is None and config.shape_frames > 1:
             shape_frames = frames[first:first + config.shape_frames]
             bar = progress_bar(len(shape_frames), "shape", "frame", enabled=progress)
             try:
-                init_pose = tracker.calibrate_shape(
-                    [masks_of(f) for f in shape_frames], progress=bar.update)
+                with shape_pass:
+                    init_pose = tracker.calibrate_shape(
+                        [masks_of(f) for f in shape_frames], progress=bar.update)
             except TrackingLost as exc:
                 raise UserError(f"cannot start tracking at frame {frames[first]}: {exc}"
                                 ) from None
@@ -258,6 +260,9 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         "events": {str(r.frame): r.event for r in results if r.event},
         "median_xor_fraction": float(np.median([r.xor_fraction for r in tracked])),
         "seconds_per_frame": timer.seconds / len(results),
+        # Where the time went: the start and shape pass, once per sequence, then each frame.
+        "shape_pass_seconds": shape_pass.seconds,
+        "tracking_seconds_per_frame": float(np.mean([r.seconds for r in results])),
         "evaluations_per_frame": float(np.mean([r.evaluations for r in results])),
         # Energy evaluations per second of the frames' tracking (the shape pass's not counted).
         "evaluations_per_second": float(sum(r.evaluations for r in results)

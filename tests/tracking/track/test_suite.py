@@ -38,3 +38,9 @@ def test_suite_subset_tracks_three_clips(tmp_path: Path, monkeypatch: pytest.Mon
         assert not case.lost and not unrecovered(case.status), (clip, case.status)
         assert case.mpjpe_mm < MAX_MPJPE_MM, (clip, case.mpjpe_mm, case.per_joint)
         assert case.offset_free_mm < MAX_OFFSET_FREE_MM, (clip, case.offset_free_mm)
+        # Where the time went (run.json): the start and shape pass, once, then each frame,
+        # which together are most of the clip's time.
+        seconds = FRAMES / case.fps
+        assert 0 < case.shape_pass_s < seconds, (clip, case.shape_pass_s, seconds)
+        assert case.shape_pass_s + FRAMES / case.tracking_fps < seconds, clip
+        assert case.shape_pass_s + FRAMES / case.tracking_fps > 0.5 * seconds, clip
