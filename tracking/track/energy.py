@@ -12,7 +12,8 @@ versions of the video frames by means of an image pyramid", hence the levels her
   (``cv2.INTER_AREA``) and kept where the average is >= 0.5, so a coarse pixel is foreground
   when at least half of it was, and a limb half a coarse pixel wide does not vanish;
 * the model is rendered directly at each level's camera (pixel-centre rule of
-  :mod:`tracking.track.render`);
+  :mod:`tracking.track.render`); the energy counts its XOR without drawing it (`XorCount`:
+  the image's own count plus +1 or -1 for each pixel the model covers), the same integers;
 * the XOR count of level l is multiplied by the area ratio of the level (4**l when the image
   size divides by 2**l), i.e. expressed in full-resolution pixels, so levels are comparable;
 * pixels of a view whose label is unknown (``known`` False: the background behind them could
