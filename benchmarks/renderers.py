@@ -14,7 +14,10 @@ Per renderer, all measured in this run:
   pyramid levels 0, 1, 2 (640x480, 320x240, 160x120), for about ``--budget`` seconds each;
 * agreement with ``open3d-raycast``: XOR pixels / ray-cast silhouette pixels, mean and max
   over poses x cameras;
-* speed ratio: open3d-raycast's ms per view over the renderer's.
+* speed ratio: open3d-raycast's ms per view over the renderer's;
+* for the default renderer, the energy's evaluations per second as it counts the XOR without
+  drawing the model (`tracking.track.energy.XorCount`) against drawing the masks and counting
+  their XOR (the former way; the same integers, checked), and the ratio.
 
 Filament (``open3d-filament``) on a CPU-only machine runs on Mesa's lavapipe: expect
 0.04-0.5 s per frame and, now and then, a stall of 25-50 s on a new camera's first frame (the
@@ -27,6 +30,7 @@ import argparse
 import statistics
 import sys
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -53,7 +57,7 @@ def random_poses(count: int, seed: int) -> list[Pose]:
     return poses
 
 
-def _evals_per_second(energy: SilhouetteEnergy, poses: list[Pose], level: int,
+def _evals_per_second(energy: Callable[[Pose, int], float], poses: list[Pose], level: int,
                       budget_s: float) -> float:
     energy(poses[0], level)  # warm-up: per-camera caches of this level
     start, count = time.perf_counter(), 0
@@ -124,6 +128,21 @@ def main() -> int:
               f"{rates[2]:>8.1f}{agreement:>16}{worst:>8}{reference_ms / ms:>17.2f}x")
     for name, reason in failed.items():
         print(f"{name:<17}unavailable: {reason}")
+    if DEFAULT_RENDERER in renderers:
+        # The energy counts its XOR without drawing the model (`XorCount`); the former way drew
+        # the masks and counted their XOR: the same integers, evaluated here on the same poses.
+        energy = SilhouetteEnergy(model, cameras, masks, renderers[DEFAULT_RENDERER],
+                                  levels=len(LEVELS))  # fmt: skip
+
+        def drawn(pose: Pose, level: int) -> float:
+            return float(sum(np.count_nonzero(x) for x in energy.xor_masks(pose, level)))
+
+        assert all(drawn(p, 1) * energy._pixel_area[1][0] == energy(p, 1) for p in poses)
+        counted = [_evals_per_second(energy, poses, level, args.budget) for level in LEVELS]
+        former = [_evals_per_second(drawn, poses, level, args.budget) for level in LEVELS]
+        print(f"\n{DEFAULT_RENDERER} energy, counted (ours) / drawn (the former way), evals/s: "
+              + ", ".join(f"L{level} {c:.0f} / {f:.0f} = {c / f:.2f}x"
+                          for level, c, f in zip(LEVELS, counted, former, strict=True)))
     fastest = min(rows, key=lambda n: rows[n][0])
     print()
     print(f"fastest: {fastest}; default renderer (tracking.track.render.DEFAULT_RENDERER): "
