@@ -633,11 +633,16 @@ class SilhouetteTracker:
             raise TrackingLost("the silhouettes do not intersect in a visual hull")
         up = rig_up(self.cameras, points.mean(axis=0))
         # The superquadrics' fit, whatever `mocap fit` defaults to: it is only a start, the
-        # silhouettes refine it (a skinned refinement of a hull is slow and no better).
+        # silhouettes refine it (a skinned refinement of a hull is slow and no better). Its
+        # tests off, the height's too: a hull the upright orientations cannot fit (a body
+        # upside down) failed that one and ran every fallback stage of the fit, 126 s
+        # against 13 for the first stage (test_bad_input's handstand); the hull's extent caps
+        # the start's height below, and a recovery keeps the subject's shape.
         fit = fit_body(points, FitConfig(body="superquadric", min_inlier_fraction=0.0,
                                          max_median_residual=1.0,
                                          max_unexplained_cluster=1.0,
-                                         min_limb_support=0.0, hold=_START_HELD),
+                                         min_limb_support=0.0, metric=False,
+                                         hold=_START_HELD),
                        up=up)  # fmt: skip
         estimate_shape = self.shape is None
         if estimate_shape:
@@ -1133,7 +1138,16 @@ class SilhouetteTracker:
             return self._lost(frame, float("nan"), area, start, why)
         event = ""
         try:
-            if not self.history:
+            if not self.history and init is None and self._lost_since is not None \
+                    and self._last_good is not None:
+                # After lost frames the start search runs from the last good pose as well as
+                # from the visual hull, whose upright starts and fit cannot reach every pose.
+                energy = self._energy(masks)
+                x, _, found = self._recover(masks, energy, None, np.inf)
+                if x is None or found is None:
+                    raise TrackingLost("the start search found no pose")
+                event = f"init from {found}"
+            elif not self.history:
                 pose, event = self.initialise(masks, init)
                 x = pose.params
                 energy = self._energy(masks)  # the model exists (and is fixed) from here on
@@ -1224,12 +1238,14 @@ class SilhouetteTracker:
         return FrameResult(frame, None, energy, area, self.evaluations,
                            time.perf_counter() - start, f"{status}: {why}", status)  # fmt: skip
 
-    def _recover(self, masks: Sequence[np.ndarray], energy: SilhouetteEnergy, x: np.ndarray,
-                 e: float) -> tuple[np.ndarray, float, str | None]:  # fmt: skip
-        """After a divergence, the start search again: from the last good pose (and its
-        left/right swaps) with the limbs' grids over their whole range, and from the visual
-        hull (`initialise`). Returns the candidate of lowest XOR, the tracked pose `x`
-        (energy `e`) included, its energy, and where it came from (None: `x`)."""
+    def _recover(self, masks: Sequence[np.ndarray], energy: SilhouetteEnergy,
+                 x: np.ndarray | None, e: float,
+                 ) -> tuple[np.ndarray | None, float, str | None]:  # fmt: skip
+        """After a divergence or lost frames, the start search again: from the last good pose
+        (and its left/right swaps) with the limbs' grids over their whole range, and from the
+        visual hull (`initialise`). Returns the candidate of lowest XOR, the tracked pose `x`
+        (energy `e`; None and inf after lost frames) included, its energy, and where it came
+        from (None: `x`)."""
         history = self.history
         candidates: list[tuple[str, np.ndarray]] = []
         if self._last_good is not None:

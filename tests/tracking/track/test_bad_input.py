@@ -299,3 +299,30 @@ def test_a_start_after_a_gap_over_the_absolute_bar_is_not_recovered():
         statuses, [r.event for r in results])
     assert "found nothing under the absolute bar 35%" in results[4].event
     assert results[4].xor_fraction > 0.35 and errors[5] < 15, (results[4].xor_fraction, errors)
+
+
+def _handstand(frames: int) -> list:
+    """Upside down on the hands (arms raised overhead, so below), legs apart and swinging."""
+    from tracking.body.model import Pose
+
+    return [Pose.from_dict({
+        "root_ty": 1.05, "root_rz": 3.0, "root_ry": 0.4,
+        "l_shoulder_rz": 2.8, "r_shoulder_rz": -0.5 + 0.0 * k,
+        "r_shoulder_rx": -2.6, "l_hip_rz": 0.35 + 0.03 * k, "r_hip_rz": -0.35,
+        "l_hip_rx": -0.2 * k, "r_knee_flex": 0.4,
+    }) for k in range(frames)]  # fmt: skip
+
+
+def test_after_lost_frames_the_start_search_starts_from_the_last_good_pose_too():
+    """A subject upside down is absent for frames 3-4: at frame 5 the start search runs from
+    the last good pose as well as from the visual hull, whose upright starts and fit (within
+    60 degrees of up) cannot reach a handstand. Found again, on its pose."""
+    truth = _handstand(6)
+    masks = [[np.zeros_like(m) for m in _masks(p)] if k in (3, 4) else _masks(p)
+             for k, p in enumerate(truth)]  # fmt: skip
+    results, errors = _track(masks, truth)
+    statuses = [r.status for r in results]
+    assert statuses == ["init", "tracked", "tracked", "absent", "absent", "recovered"], (
+        statuses, [r.event for r in results])
+    assert "init from the last good pose (frame 2)" in results[5].event, results[5].event
+    assert max(errors[:3]) < 15 and errors[5] < 15, errors
