@@ -14,8 +14,10 @@ distortion is honoured through :class:`~tracking.rig.cameras.Camera`.
   below a pixel for small triangles) and a scanline fill marks every covered pixel centre,
   both compiled by numba in one call per view (`tracking.track.raster`). For the energy it
   can count rather than draw (`covered_gains`: a per-pixel gain summed over the covered
-  pixels): with the tracker's batched limb-sample test, `mocap track` of the suite's walk
-  took 58.3 s instead of 77.4, its joints identical (session 23).
+  pixels). The same integers: tracks are identical. What it saves is small: the tracker's
+  energy evaluations per second rose about 10% on the suite's walk, whose `mocap track`
+  took as long within the machine's noise (old and new run in turn: 91-106 s against
+  93-102 s; session 23).
   Triangles with a vertex behind the near plane (``near_m``) are dropped, not clipped.
 * ``open3d-raycast``: Open3D's Embree ray caster on the CPU, one ray through every pixel
   centre (the undistorted ray, so distortion is exact). The reference of the agreement tests.
