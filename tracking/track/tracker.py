@@ -1144,7 +1144,7 @@ class SilhouetteTracker:
                 # from the visual hull, whose upright starts and fit cannot reach every pose.
                 energy = self._energy(masks)
                 x, _, found = self._recover(masks, energy, None, np.inf)
-                if x is None or found is None:
+                if x is None:  # no candidate: neither the last good pose nor the hull
                     raise TrackingLost("the start search found no pose")
                 event = f"init from {found}"
             elif not self.history:
