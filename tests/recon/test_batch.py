@@ -81,6 +81,7 @@ def runs(tmp_path_factory, cluster):
     return root, serial, report, lines, stream.data
 
 
+@pytest.mark.slow  # session 24: make test took 17:23 on these machines, over its 10 minutes
 def test_dask_run_gives_the_files_of_a_serial_run(runs):
     root, serial, report, lines, _ = runs
     assert all(r.ok for r in serial), [r.line() for r in serial]
@@ -120,6 +121,7 @@ def test_dask_run_gives_the_files_of_a_serial_run(runs):
     assert lines[1].startswith("dashboard   http://127.0.0.1:")
 
 
+@pytest.mark.slow  # session 24: make test took 17:23 on these machines, over its 10 minutes
 def test_a_failed_workspace_is_reported_and_the_others_finish(runs):
     root, _, report, _, _ = runs
     bad = report.results[1]
@@ -134,6 +136,7 @@ def test_a_failed_workspace_is_reported_and_the_others_finish(runs):
         assert [s.status for s in good.steps] == [StepStatus.DONE] * 3
 
 
+@pytest.mark.slow  # session 24: make test took 17:23 on these machines, over its 10 minutes
 def test_a_rerun_from_the_cli_reuses_every_finished_step(runs):
     """No --scheduler: the CLI starts its own LocalCluster; every step resumes from run.json."""
     root, _, _, _, _ = runs

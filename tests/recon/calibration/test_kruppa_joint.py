@@ -201,6 +201,7 @@ def noisy_matches(rng, cams, K, sigma_px, frame=SIZE) -> list[EpipolarPair]:
     return out
 
 
+@pytest.mark.slow  # session 24: make test took 17:23 on these machines, over its 10 minutes
 def test_the_inliers_give_the_principal_point_to_a_pixel_or_two() -> None:
     """Random 8-view scenes, principal point 20 px off on both axes, 1 px noise: the epipolar
     fit, started 3% off at the centre, lands within 0.3% and 3 px (median of 4 scenes; measured
@@ -221,6 +222,7 @@ def test_the_inliers_give_the_principal_point_to_a_pixel_or_two() -> None:
     assert np.median(pp_errors) < 3.0
 
 
+@pytest.mark.slow  # session 24: make test took 17:23 on these machines, over its 10 minutes
 def test_the_epipolar_fit_rejects_too_few_pairs_and_a_point_outside_the_image() -> None:
     rng = np.random.default_rng(3)
     cams = views(rng, 3, 600.0)

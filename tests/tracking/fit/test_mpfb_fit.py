@@ -36,6 +36,7 @@ def walking_fit():
     return pose, points, fit_body(points, FitConfig(body="mpfb"))
 
 
+@pytest.mark.slow  # session 24: make test took 17:23 on these machines, over its 10 minutes
 def test_mpfb_fit_recovers_the_joints_of_another_mpfb_subject(walking_fit):
     pose, _, result = walking_fit
     truth = MISMATCHED.joints(pose)
@@ -52,6 +53,7 @@ def test_mpfb_fit_recovers_the_joints_of_another_mpfb_subject(walking_fit):
     assert result.residual_median < 0.005  # 5 mm noise: |N(0, 5 mm)| has median 3.4 mm
 
 
+@pytest.mark.slow  # session 24: make test took 17:23 on these machines, over its 10 minutes
 def test_the_fit_file_starts_mpfb_tracking_with_the_fitted_subject(walking_fit, tmp_path):
     pose, _, result = walking_fit
     path = tmp_path / "fit.json"
@@ -66,6 +68,7 @@ def test_the_fit_file_starts_mpfb_tracking_with_the_fitted_subject(walking_fit, 
     assert np.allclose(json.loads(path.read_text())["joints"]["pelvis"], fitted[0])
 
 
+@pytest.mark.slow  # session 24: make test took 17:23 on these machines, over its 10 minutes
 def test_cli_mpfb_fit_of_a_box_fails_and_still_writes_the_body(tmp_path):
     rng = np.random.default_rng(0)
     # A 0.5 x 1.7 x 0.3 m box's surface: body-sized, but no body.

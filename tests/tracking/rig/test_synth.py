@@ -393,6 +393,7 @@ def test_ring_grows_until_the_subject_fits():
 
 
 @pytest.mark.shared_data
+@pytest.mark.slow  # session 24: make test took 17:23 on these machines, over its 10 minutes
 def test_report_of_a_synthetic_sequence_reports_its_ground_truth_only_when_asked(tmp_path):
     walk = shared_dataset("mocap_bvh") / "cmu_02_01_walk.bvh"
     ws = tmp_path / "walk"

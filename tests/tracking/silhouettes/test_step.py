@@ -332,6 +332,7 @@ def test_the_cli_reports_frames_without_subject_and_records_them(tmp_path: Path)
 
 
 @pytest.mark.shared_data
+@pytest.mark.slow  # session 24: make test took 17:23 on these machines, over its 10 minutes
 def test_silhouettes_of_the_pose2sim_demo_are_one_person(tmp_path: Path):
     """No empty background exists: the temporal median. 4 frames per camera, 11 background
     samples; the person covers a few percent of each portrait frame."""
