@@ -30,11 +30,14 @@ hull's extent along up, since a hull of few views is fatter than the body and th
 fill it. A hull cannot tell left from right limbs: the fit and its left/right swaps of legs and
 arms (`swap_sides`) are each refined against the outlines. The best of them competes with
 upright stances at `init_headings` headings (`upright_starts`), since the fit can fold a limb
-into the trunk or lean the trunk to explain a limb: each is refined by the whole hierarchy with
-the limbs' grids over their whole range, and the lowest XOR wins. When the shape is unknown,
-the shape parameters (the segment lengths, or the skinned body's macro shape and clothing:
-`TrackedModel.shape_parameters`) then come from the outlines, and `calibrate_shape` refines
-them over several frames of a first pass. The rotation angles of the root lock at a 90
+into the trunk or lean the trunk to explain a limb, and with poses whose head, hands and feet
+are on the hull's extremities (`tracking.track.extremities`: the best `init_extremity_starts`
+by XOR), since neither reaches a body upside down or sideways: each is refined by the whole
+hierarchy with the limbs' grids over their whole range, and the lowest XOR wins (an extremity
+start only by a clear lead, `_EXTREMITY_LEAD`: near ties went the wrong way). When the shape
+is unknown, the shape parameters (the segment lengths, or the skinned body's macro shape and
+clothing: `TrackedModel.shape_parameters`) then come from the outlines, and `calibrate_shape`
+refines them over several frames of a first pass. The rotation angles of the root lock at a 90
 degree pitch, so an upright body should be tracked in a Y-up frame
 (`tracking.rig.cameras.upright_frame`; `mocap track` does). The spine's side bend and twist
 stay 0 through this start and the shape pass (`_START_HELD`) and are tracked from then on. A
@@ -113,6 +116,11 @@ from tracking.silhouettes.hull import (
 from tracking.track.contour import ContourConfig, ContourRefiner, refine_shape
 from tracking.track.divergence import WatchConfig, XorWatch
 from tracking.track.energy import SilhouetteEnergy, XorCount, counted
+from tracking.track.extremities import (
+    extremity_assignments,
+    hull_extremities,
+    pose_from_extremities,
+)
 from tracking.track.render import render_views
 
 _ROOT = [PARAM_INDEX[n] for n in ("root_tx", "root_ty", "root_tz", "root_rz", "root_rx",
@@ -124,6 +132,21 @@ _START_HELD = ADDED_PARAMS
 """Held at 0 while the start is searched (the visual-hull fit, the competing starts, the shape
 pass) and freed for tracking: free there, they cost the Pose2Sim demo 0.734 -> 0.686 median
 IoU (another start won, a worse basin for the whole clip), session 17."""
+
+_EXTREMITY_ASSIGNMENTS = 12
+"""Assignments of head, hands and feet to the hull's extremities solved and scored at a start
+(`SilhouetteTracker._extremity_starts`), 0.2 s each. On the motion suite's cartwheel at frame 23
+(upside down) the right one was 4th by its geodesic lengths (tied with its three left/right
+swaps), and its pose 3rd of the 12 by XOR: `init_extremity_starts` 3 refines it."""
+
+_EXTREMITY_LEAD = 0.8
+"""An extremity start wins at a start only with an XOR under this fraction of the best of the
+fit and the upright starts'. Measured at frame 0 (session 26): the extremity starts' best
+against the others' was 0.97 on the Pose2Sim demo, where it won without the lead, ended 1.94 m
+tall against 1.85, and cost the clip's median IoU 0.827 -> 0.794; 0.99 and 0.94 on the
+suite's jump and climb_steps (34.4 -> 33.2 and 8.1 -> 8.8 mm: a wash); under 0.8 nowhere
+else at frame 0. Where the others fail it leads by far: 0.52 and 0.49 on the suite's
+cartwheel upside down (frames 23 and 27, XOR 0.487 -> 0.255 and 0.564 -> 0.279)."""
 
 MEND_BACKOFF_FRAMES = 5
 """Frames after a mend that found nothing without another (`SilhouetteTracker._mend_unexplained`):
@@ -336,6 +359,14 @@ class TrackConfig:
         metadata={"help": "upright starting poses, at this many headings, that compete with "
                   "the visual-hull fit at initialisation (0 = the fit alone)"},
     )  # fmt: skip
+    init_extremity_starts: int = field(
+        default=3,
+        metadata={"help": "starts from the visual hull's extremities (head, hands and feet "
+                  "assigned, inverse kinematics; tracking.track.extremities), the best by XOR, "
+                  "that compete with the fit and the upright starts at initialisation, "
+                  f"winning only with an XOR under {_EXTREMITY_LEAD} times theirs (0 = none): "
+                  "they reach bodies upside down or sideways"},
+    )  # fmt: skip
     init_simplex_evals: int = field(
         default=120, metadata={"help": "evaluations of each simplex at initialisation"}
     )
@@ -384,7 +415,8 @@ class TrackConfig:
                           ("init_starts", 1), ("simplex_evals", 1),
                           ("init_simplex_evals", 1), ("passes", 1), ("shape_stride", 1),
                           ("shape_frames", 0), ("contour_iterations", 0),
-                          ("init_headings", 0), ("high_xor_frames", 0), ("xor_window", 1)):
+                          ("init_headings", 0), ("init_extremity_starts", 0),
+                          ("high_xor_frames", 0), ("xor_window", 1)):
             if getattr(self, name) < low:
                 raise UserError(f"{flag(name)} must be >= {low}, got {getattr(self, name)}")
         for name in ("prior_weight", "twist_weight", "range_gain", "spike_xor_factor",
@@ -665,20 +697,48 @@ class SilhouetteTracker:
             pelvis += (np.min(points @ up) + self.shape.hip_height - pelvis @ up) * up
         starts = [self._best_hypothesis(energy, fit.pose.params),
                   *upright_starts(fit.pose, up, self.config.init_headings, pelvis)]
-        refined = [self._refine_all(energy, p.params.copy(), init=True) for p in starts]
+        # Neither reaches a body upside down, sideways or seated: poses whose head, hands
+        # and feet are on the hull's extremities compete too.
+        ends = self._extremity_starts(energy, points)
+        refined = [self._refine_all(energy, p.params.copy(), init=True)
+                   for p in [*starts, *ends]]  # fmt: skip
         scores = [self._objective(energy, x, self.config.final_level) for x in refined]
-        best = int(np.argmin(scores))
+        best = int(np.argmin(scores[:len(starts)]))
+        if ends:  # an extremity start wins by a clear lead only (`_EXTREMITY_LEAD`)
+            lead = len(starts) + int(np.argmin(scores[len(starts):]))
+            if scores[lead] < _EXTREMITY_LEAD * scores[best]:
+                best = lead
         x = refined[best]
         if estimate_shape and self.config.init_shape:
             # People differ in proportions: the segment lengths from the silhouettes'
             # outlines, with the pose (fixed afterwards: thesis 6.2.4).
             x = self._refine_shape([masks], [Pose(x)])[0].params
             x = self._refine_all(self._energy(masks), x, init=True)
-        start = "its fit" if best == 0 else (
-            f"an upright start at {360 * (best - 1) // (len(starts) - 1)} deg from its fit")
+        if best == 0:
+            start = "its fit"
+        elif best < len(starts):
+            start = f"an upright start at {360 * (best - 1) // (len(starts) - 1)} deg from its fit"
+        else:
+            start = f"start {best - len(starts) + 1} of {len(ends)} from its extremities"
         message = f"init from visual hull ({len(points)} surface voxels; {start})"
         self.history = []
         return Pose(x), message
+
+    def _extremity_starts(self, energy: SilhouetteEnergy, points: np.ndarray) -> list[Pose]:
+        """The `init_extremity_starts` poses of lowest XOR at `search_level` among those whose
+        end sites reach the visual hull's extremities (`tracking.track.extremities`: surface
+        voxels `points`), over the `_EXTREMITY_ASSIGNMENTS` best assignments of head, hands
+        and feet to them."""
+        count = self.config.init_extremity_starts
+        if count == 0:
+            return []
+        assert self.shape is not None
+        ends = hull_extremities(points, self.config.voxel_m)
+        poses = [pose_from_extremities(ends, a, self.shape, self._free(), points.mean(axis=0))[0]
+                 for a in extremity_assignments(ends, self.shape, _EXTREMITY_ASSIGNMENTS)]
+        scores = [energy(p, self.config.search_level) for p in poses]
+        self.evaluations += len(poses)
+        return [poses[i] for i in np.argsort(scores, kind="stable")[:count]]
 
     def _best_hypothesis(self, energy: SilhouetteEnergy, x: np.ndarray) -> Pose:
         """The visual hull cannot tell which leg (or arm) is which: of the pose and its
