@@ -39,6 +39,9 @@ def _track(frames_masks, truth, config=FAST, given: bool = True):
     return results, errors
 
 
+# session 26, make test over 10 minutes: 67 s (2 shared cores); re-acquisition stays in
+# test_a_subject_who_enters_late_is_tracked_from_its_first_frame
+@pytest.mark.slow
 def test_a_subject_who_leaves_the_view_is_absent_then_found_again():
     """Frames 3-4 show nobody in any camera: they are "absent" (no pose, no search), and
     frame 5, the subject back, is found again by the start search from the visual hull."""
@@ -128,6 +131,9 @@ def test_the_visual_hull_tells_one_subject_from_two():
         assert abs(np.linalg.norm(parts[0].centre - parts[1].centre) - dx) < 0.1, parts
 
 
+# session 26, make test over 10 minutes: 80 s (2 shared cores); two subjects stay in
+# test_a_start_with_two_subjects_in_view_waits_for_one
+@pytest.mark.slow
 def test_two_subjects_in_view_are_said_and_not_tracked_as_one():
     """A second subject stands 1.3 m beside the tracked one in frames 3-4: those frames are
     "two-subjects" (no pose, the event says why) instead of a fit to both (the former code
@@ -249,6 +255,9 @@ def test_a_subject_partly_out_of_a_view_keeps_its_visual_hull_and_is_flagged():
     assert _mpjpe_mm(result.pose, SHAPE, pose) < 10
 
 
+# session 26, make test over 10 minutes: 57 s (2 shared cores); partly out of view stays in
+# test_a_subject_partly_out_of_a_view_keeps_its_visual_hull_and_is_flagged
+@pytest.mark.slow
 def test_an_automatic_start_with_the_head_out_of_a_view_finds_the_subject():
     """The same frame started from the silhouettes alone, the shape unknown: 1.75 m tall and 3
     mm off (measured; the former hull's start: 1.55 m, 30% XOR, 223 mm off, status "init")."""
