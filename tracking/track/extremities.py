@@ -9,8 +9,8 @@ distances between them agree with the subject's segment lengths; `pose_from_extr
 then solves for the pose whose end sites reach them (inverse kinematics, least squares within
 the joint limits). The tracker scores these poses by their XOR energy and refines the best
 against the silhouettes (`SilhouetteTracker._initialise_from_hull`), beside the hull fit and
-the upright starts. An upside-down body (a cartwheel, a handstand) or a seated one is then a
-hypothesis like any other.
+the upright starts, winning only by a clear lead (`tracker._EXTREMITY_LEAD`). An upside-down
+body (a cartwheel, a handstand) is then a hypothesis like any other.
 """
 
 from __future__ import annotations
@@ -161,13 +161,12 @@ def extremity_assignments(ends: HullExtremities, shape: BodyShape,
                     cost += term(lh, rh, "hand_hand")
                 scored.append(Assignment((head, max(lh, -1), max(rh, -1), lf, rf), cost))
     scored.sort(key=lambda a: a.cost)
-    unique: list[Assignment] = []
+    unique: dict[tuple[int, ...], Assignment] = {}  # each at its lowest cost, in cost order
     for a in scored:
-        if a.ends not in [u.ends for u in unique]:
-            unique.append(a)
+        unique.setdefault(a.ends, a)
         if len(unique) >= max_count:
             break
-    return unique
+    return list(unique.values())
 
 
 def pose_from_extremities(ends: HullExtremities, assignment: Assignment, shape: BodyShape,

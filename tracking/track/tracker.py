@@ -697,7 +697,7 @@ class SilhouetteTracker:
             pelvis += (np.min(points @ up) + self.shape.hip_height - pelvis @ up) * up
         starts = [self._best_hypothesis(energy, fit.pose.params),
                   *upright_starts(fit.pose, up, self.config.init_headings, pelvis)]
-        # Neither reaches a body upside down, sideways or seated: poses whose head, hands
+        # Neither reaches a body upside down or sideways: poses whose head, hands
         # and feet are on the hull's extremities compete too.
         ends = self._extremity_starts(energy, points)
         refined = [self._refine_all(energy, p.params.copy(), init=True)
