@@ -80,18 +80,19 @@ class XorCount:
         static = static or [np.zeros_like(m) for m in masks]
         self.base = np.array([np.count_nonzero(counted(s ^ m, k))
                               for s, m, k in zip(static, masks, known, strict=True)])  # fmt: skip
-        self.gains = []
+        from tracking.track.render import ViewGains
+
+        gains = []
         for s, m, k in zip(static, masks, known, strict=True):
             free = ~s if k is None else ~s & k
-            self.gains.append(np.where(free, np.where(m, -1, 1), 0).astype(np.int8))
-        self.stamps = [np.zeros(m.shape, np.int64) for m in masks]
+            gains.append(np.where(free, np.where(m, -1, 1), 0).astype(np.int8))
+        self.views = ViewGains(cameras, gains)
 
     def counts(self, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
         """(views,) XOR pixel counts (each view's own pixels) with the mesh drawn."""
         from tracking.track.render import covered_gains
 
-        return self.base + covered_gains(self.renderer, vertices, faces, self.cameras,
-                                         self.gains, self.stamps)  # fmt: skip
+        return self.base + covered_gains(self.renderer, vertices, faces, self.views)
 
 
 class SilhouetteEnergy:

@@ -1,6 +1,7 @@
 """The compiled kernels of the ``cpu-raster`` renderer (:mod:`tracking.track.render`): the
 projection of the vertices (`project_vertices`, `Camera.project`'s arithmetic) and the scanline
-fill (`fill_triangles`), run together by `render_mask`.
+fill (`fill_triangles`), run together by `render_mask`; `covered_gains` counts rather than
+draws, every view in one call, the views shared among numba's threads.
 
 Apart from :mod:`tracking.track.render` so that loading the renderer plugins, as `mocap plugins`
 does, does not import numba; it is imported on the first render.
@@ -60,7 +61,7 @@ def fill_triangles(uv: np.ndarray, faces: np.ndarray, mask: np.ndarray, keep_win
 @numba.njit(cache=True, nogil=True)
 def _scan(uv: np.ndarray, faces: np.ndarray, keep_winding: float, mask: np.ndarray,
           gain: np.ndarray, stamp: np.ndarray, token: int) -> int:  # fmt: skip
-    """The scanline fill of `fill_triangles` and `covered_gain`: with an empty `gain`, sets
+    """The scanline fill of `fill_triangles` and `covered_gains`: with an empty `gain`, sets
     `mask` at every covered pixel centre; else returns the sum of `gain` over the covered
     pixels, each counted once (`stamp` set to `token` where counted; `mask` unused)."""
     counting = gain.shape[0] > 0
@@ -122,14 +123,23 @@ def render_mask(vertices: np.ndarray, faces: np.ndarray, cam_from_world: np.ndar
     fill_triangles(uv, faces, mask, keep_winding)
 
 
-@numba.njit(cache=True, nogil=True)
-def covered_gain(vertices: np.ndarray, faces: np.ndarray, cam_from_world: np.ndarray,
-                 K: np.ndarray, dist: np.ndarray, near_m: float, max_radius2: float,
-                 keep_winding: float, gain: np.ndarray, stamp: np.ndarray, token: int,
-                 ) -> int:  # fmt: skip
-    """`render_mask`'s pixels, not drawn but summed: `gain` (an (H, W) int8 image) over the
-    pixels the triangles cover, each once (`stamp`, an (H, W) int64 image, is set to `token`
-    where counted: a token not in it yet starts a new count, so nothing is cleared)."""
-    uv = np.empty((vertices.shape[0], 2))
-    project_vertices(vertices, cam_from_world, K, dist, near_m, max_radius2, uv)
-    return _scan(uv, faces, keep_winding, np.zeros((0, 0), np.bool_), gain, stamp, token)
+@numba.njit(cache=True, nogil=True, parallel=True)
+def covered_gains(vertices: np.ndarray, faces: np.ndarray, cams_from_world: np.ndarray,
+                  Ks: np.ndarray, dists: np.ndarray, near_m: float, max_radius2s: np.ndarray,
+                  keep_winding: float, gains: np.ndarray, stamps: np.ndarray, token: int,
+                  ) -> np.ndarray:  # fmt: skip
+    """(views,) int64: per view, `render_mask`'s pixels, not drawn but summed: ``gains[v]``
+    (an int8 image) over the pixels the triangles cover, each once (``stamps[v]``, an int64
+    image, is set to `token` where counted: a token not in it yet starts a new count, so
+    nothing is cleared). The views run in parallel (numba's ``prange``). cams_from_world
+    (V, 3, 4), Ks (V, 3, 3), dists (V, 5), max_radius2s (V,): the cameras; gains (V, H, W),
+    zero past a view's own size (views of several sizes share the largest), stamps the
+    same shape."""
+    totals = np.zeros(gains.shape[0], np.int64)
+    for v in numba.prange(gains.shape[0]):
+        uv = np.empty((vertices.shape[0], 2))
+        project_vertices(vertices, cams_from_world[v], Ks[v], dists[v], near_m,
+                         max_radius2s[v], uv)  # fmt: skip
+        totals[v] = _scan(uv, faces, keep_winding, np.zeros((0, 0), np.bool_), gains[v],
+                          stamps[v], token)  # fmt: skip
+    return totals

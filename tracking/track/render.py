@@ -14,10 +14,12 @@ distortion is honoured through :class:`~tracking.rig.cameras.Camera`.
   below a pixel for small triangles) and a scanline fill marks every covered pixel centre,
   both compiled by numba in one call per view (`tracking.track.raster`). For the energy it
   can count rather than draw (`covered_gains`: a per-pixel gain summed over the covered
-  pixels). The same integers: tracks are identical. What it saves is small: the tracker's
-  energy evaluations per second rose about 10% on the suite's walk, whose `mocap track`
-  took as long within the machine's noise (old and new run in turn: 91-106 s against
-  93-102 s; session 23).
+  pixels, every view in one call, the views shared among numba's threads). The same
+  integers: tracks are identical. Counting rather than drawing saved little (the suite's
+  walk: 91-106 s against 93-102 s, session 23); the views on the 2 cores' threads give the
+  energy 1.6-1.85x the evaluations per second of one thread (`benchmarks/renderers.py`), and
+  `mocap track` of the suite's jump (6 frames, 640x480) 61 -> 46 s and 57 -> 51 s, its
+  joints byte-identical (old and new run in turn, session 27).
   Triangles with a vertex behind the near plane (``near_m``) are dropped, not clipped.
 * ``open3d-raycast``: Open3D's Embree ray caster on the CPU, one ray through every pixel
   centre (the undistorted ray, so distortion is exact). The reference of the agreement tests.
@@ -155,26 +157,49 @@ _TOKENS = itertools.count(1)
 """`covered_gains`' count tokens: one per call, never reused (the stamps need no clearing)."""
 
 
-def covered_gains(renderer: Any, vertices_in_world: Any, faces: Any, cameras: Sequence[Camera],
-                  gains: Sequence[np.ndarray], stamps: Sequence[np.ndarray]) -> np.ndarray:
-    """(views,) int: per camera, the sum of ``gains[view]`` ((H, W) int8) over the pixels the
-    mesh covers in that view: what the XOR of a silhouette changes by when the mesh is drawn
-    into it (`tracking.track.energy.XorCount`). ``cpu-raster`` sums while it scans, drawing no
-    mask (``stamps[view]``: an (H, W) int64 scratch image, each pixel counted once); any other
-    renderer draws its masks (`render_views`) and they are summed."""
+class ViewGains:
+    """Per view, a per-pixel gain to sum over the pixels a mesh covers (`covered_gains`), with
+    what the compiled count needs made once: the gains in one (views, H, W) int8 array, zero
+    past a smaller view's size; per view an (H, W) int64 scratch image (``stamps``: each pixel
+    counted once); the cameras' parameters stacked."""
+
+    def __init__(self, cameras: Sequence[Camera], gains: Sequence[np.ndarray]) -> None:
+        self.cameras = list(cameras)
+        self.gains = [np.asarray(g, dtype=np.int8) for g in gains]
+        if [g.shape for g in self.gains] != [(c.height, c.width) for c in self.cameras]:
+            raise ValueError("need one (height, width) gain image per camera")
+        shape = (len(self.gains), max((g.shape[0] for g in self.gains), default=0),
+                 max((g.shape[1] for g in self.gains), default=0))
+        self.stacked = np.zeros(shape, np.int8)
+        for view, gain in zip(self.stacked, self.gains, strict=True):
+            view[:gain.shape[0], :gain.shape[1]] = gain
+        self.stamps = np.zeros(shape, np.int64)
+        self.cams_from_world = np.array([c.cam_from_world for c in self.cameras]).reshape(-1, 3, 4)
+        self.Ks = np.array([c.K for c in self.cameras]).reshape(-1, 3, 3)
+        self.dists = np.array([c.dist for c in self.cameras]).reshape(-1, 5)
+        self.max_radius2s = np.array([c.max_radius2 for c in self.cameras], dtype=float)
+
+
+def covered_gains(renderer: Any, vertices_in_world: Any, faces: Any, views: ViewGains
+                  ) -> np.ndarray:  # fmt: skip
+    """(views,) int: per camera of `views`, the sum of its gain over the pixels the mesh
+    covers in that view: what the XOR of a silhouette changes by when the mesh is drawn into
+    it (`tracking.track.energy.XorCount`). ``cpu-raster`` sums while it scans, drawing no mask,
+    every view in one compiled call that shares them among the cores; any other renderer
+    draws its masks (`render_views`) and they are summed."""
     if not isinstance(renderer, CpuRasterRenderer):
         return np.array([int(gain[mask].sum()) for gain, mask in zip(
-            gains, render_views(renderer, vertices_in_world, faces, cameras), strict=True)])
-    from tracking.track.raster import covered_gain
-
+            views.gains, render_views(renderer, vertices_in_world, faces, views.cameras),
+            strict=True)])
     vertices, tris = _check_mesh(vertices_in_world, faces)
-    vertices = np.ascontiguousarray(vertices)
+    if not len(tris) or not len(views.cameras):
+        return np.zeros(len(views.cameras), np.int64)
+    from tracking.track.raster import covered_gains as count
+
     winding = -1.0 if renderer.options.cull_back_faces else 0.0
-    token = next(_TOKENS)
-    return np.array([covered_gain(vertices, tris, camera.cam_from_world, camera.K, camera.dist,
-                                  renderer.options.near_m, camera.max_radius2, winding, gain,
-                                  stamp, token) if len(tris) else 0
-                     for camera, gain, stamp in zip(cameras, gains, stamps, strict=True)])
+    return count(np.ascontiguousarray(vertices), tris, views.cams_from_world, views.Ks,
+                 views.dists, renderer.options.near_m, views.max_radius2s, winding,
+                 views.stacked, views.stamps, next(_TOKENS))  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------------------

@@ -175,3 +175,29 @@ def test_the_xor_counted_without_drawing_equals_the_drawn_xor(setup, renderer_na
         assert np.array_equal(energy.per_view(_arm_raised_by(20), level),
                               np.array(drawn) * energy._pixel_area[level])
         assert sum(drawn) > 0
+
+
+def test_the_xor_count_of_views_of_different_sizes(setup):
+    """Views of several sizes share one padded array in the compiled count (`ViewGains`): each
+    view's count is still its own drawn XOR, a mesh partly outside the smaller views
+    included."""
+    from recon.cameras import Camera
+
+    model, cameras, _, renderer, truth = setup
+    small = [Camera(f"small{i}", 320, 200, c.K * [[0.5], [0.5], [1]], c.cam_from_world)
+             for i, c in enumerate(cameras[:2])]  # fmt: skip
+    tall = Camera("tall", 300, 520, cameras[2].K + [[0, 0, -170], [0, 0, 20], [0, 0, 0]],
+                  cameras[2].cam_from_world)  # fmt: skip
+    views = [*small, tall, cameras[3]]
+    vertices = model.posed_vertices(truth)
+    masks = [renderer.render(vertices, model.faces, c) for c in views]
+    count = XorCount(renderer, views, masks, [None] * len(views))
+    assert count.views.stacked.shape == (4, 520, 640)
+    for deg in (0, 25, 60):
+        vertices = model.posed_vertices(_arm_raised_by(deg))
+        drawn = [renderer.render(vertices, model.faces, c) for c in views]
+        expected = [np.count_nonzero(d ^ m) for d, m in zip(drawn, masks, strict=True)]
+        assert count.counts(vertices, model.faces).tolist() == expected
+        assert (sum(expected) == 0) == (deg == 0)
+    # The subject is cut by the edges of the smaller views: the padding counts nothing.
+    assert any(m[:, -1].any() or m[-1].any() for m in masks[:2])
