@@ -361,7 +361,7 @@ class _Surface:
     def posed(self, x: np.ndarray, index: np.ndarray | slice = slice(None)):
         """World positions and normals of samples `index` for unknowns x = (pose, h, g)."""
         h, g = x[_H], x[_G]
-        world = forward_kinematics(Pose(x[:N_POSE_PARAMS]), BodyShape.default(h))
+        world = forward_kinematics(Pose(x[:N_POSE_PARAMS]), _default_shape(h))
         node = self.node[index]
         rot, trans = world[node, :3, :3], world[node, :3, 3]
         local = h * (self.in_node[index] + (g - 1.0) * self.per_girth[index])
@@ -393,6 +393,23 @@ _LOSSES = {
 }
 
 
+@functools.lru_cache(maxsize=256)
+def _default_shape(height_m: float) -> BodyShape:
+    """`BodyShape.default`, kept: the fits ask for the same heights over and over, and its
+    checks cost more than the posing (a tenth of a fit's time)."""
+    return BodyShape.default(height_m)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """np.cross(a, b) of a (3,) and b (N, 3), the same products and differences in the same
+    order (so the same floats), without np.cross's overhead on small arrays."""
+    out = np.empty_like(b)
+    out[:, 0] = a[1] * b[:, 2] - a[2] * b[:, 1]
+    out[:, 1] = a[2] * b[:, 0] - a[0] * b[:, 2]
+    out[:, 2] = a[0] * b[:, 1] - a[1] * b[:, 0]
+    return out
+
+
 def _match(surface: _Surface, x: np.ndarray, points: np.ndarray, samples: np.ndarray) -> np.ndarray:
     """Index of the nearest of the surface `samples` to every point."""
     posed, _ = surface.posed(x, samples)
@@ -407,7 +424,7 @@ def _linearise(
     Pose derivatives are analytic (`pose_derivative_axes`); h and g by forward differences.
     """
     h = x[_H]
-    world, axes, pivots = pose_derivative_axes(Pose(x[:N_POSE_PARAMS]), BodyShape.default(h))
+    world, axes, pivots = pose_derivative_axes(Pose(x[:N_POSE_PARAMS]), _default_shape(h))
     node = surface.node[match]
     rot, trans = world[node, :3, :3], world[node, :3, 3]
     local = h * (surface.in_node[match] + (x[_G] - 1.0) * surface.per_girth[match])
@@ -420,7 +437,7 @@ def _linearise(
             if POSE_LAYOUT[k].kind == "translation":
                 jac[moved, :, col] = axes[k]
             else:
-                jac[moved, :, col] = np.cross(axes[k], posed[moved] - pivots[k])
+                jac[moved, :, col] = _cross(axes[k], posed[moved] - pivots[k])
         else:
             step = 1e-4 * (h if k == _H else 1.0)
             y = x.copy()
