@@ -17,8 +17,7 @@ Per renderer, all measured in this run:
 * speed ratio: open3d-raycast's ms per view over the renderer's;
 * for the default renderer, the energy's evaluations per second as it counts the XOR without
   drawing the model (`tracking.track.energy.XorCount`) against drawing the masks and counting
-  their XOR (the former way; the same integers, checked), and the ratio; and its
-  evaluations per second with the views on numba's threads (the default) against one thread.
+  their XOR (the former way; the same integers, checked), and the ratio.
 
 Filament (``open3d-filament``) on a CPU-only machine runs on Mesa's lavapipe: expect
 0.04-0.5 s per frame and, now and then, a stall of 25-50 s on a new camera's first frame (the
@@ -144,19 +143,6 @@ def main() -> int:
         print(f"\n{DEFAULT_RENDERER} energy, counted (ours) / drawn (the former way), evals/s: "
               + ", ".join(f"L{level} {c:.0f} / {f:.0f} = {c / f:.2f}x"
                           for level, c, f in zip(LEVELS, counted, former, strict=True)))
-        # Its count runs the views in parallel on numba's threads (`raster.covered_gains`):
-        # against one thread, the same integers, on the same poses.
-        import numba
-
-        threads = numba.get_num_threads()
-        numba.set_num_threads(1)
-        try:
-            one = [_evals_per_second(energy, poses, level, args.budget) for level in LEVELS]
-        finally:
-            numba.set_num_threads(threads)
-        print(f"{DEFAULT_RENDERER} energy, views on {threads} threads / on 1, evals/s: "
-              + ", ".join(f"L{level} {c:.0f} / {o:.0f} = {c / o:.2f}x"
-                          for level, c, o in zip(LEVELS, counted, one, strict=True)))
     fastest = min(rows, key=lambda n: rows[n][0])
     print()
     print(f"fastest: {fastest}; default renderer (tracking.track.render.DEFAULT_RENDERER): "

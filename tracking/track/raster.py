@@ -1,7 +1,7 @@
 """The compiled kernels of the ``cpu-raster`` renderer (:mod:`tracking.track.render`): the
 projection of the vertices (`project_vertices`, `Camera.project`'s arithmetic) and the scanline
 fill (`fill_triangles`), run together by `render_mask`; `covered_gains` counts rather than
-draws, every view in one call, the views shared among numba's threads.
+draws, every view in one call.
 
 Apart from :mod:`tracking.track.render` so that loading the renderer plugins, as `mocap plugins`
 does, does not import numba; it is imported on the first render.
@@ -123,7 +123,7 @@ def render_mask(vertices: np.ndarray, faces: np.ndarray, cam_from_world: np.ndar
     fill_triangles(uv, faces, mask, keep_winding)
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
+@numba.njit(cache=True, nogil=True)
 def covered_gains(vertices: np.ndarray, faces: np.ndarray, cams_from_world: np.ndarray,
                   Ks: np.ndarray, dists: np.ndarray, near_m: float, max_radius2s: np.ndarray,
                   keep_winding: float, gains: np.ndarray, stamps: np.ndarray, token: int,
@@ -131,12 +131,15 @@ def covered_gains(vertices: np.ndarray, faces: np.ndarray, cams_from_world: np.n
     """(views,) int64: per view, `render_mask`'s pixels, not drawn but summed: ``gains[v]``
     (an int8 image) over the pixels the triangles cover, each once (``stamps[v]``, an int64
     image, is set to `token` where counted: a token not in it yet starts a new count, so
-    nothing is cleared). The views run in parallel (numba's ``prange``). cams_from_world
+    nothing is cleared). One thread: the views on numba's threads (``prange``) gave the energy
+    1.6-1.85x the evaluations per second on an idle 2-core machine, but two such processes side
+    by side (`make test`'s two workers) ran 3.5x slower than one thread each, OpenMP's
+    threads spinning between the evaluations (session 27). cams_from_world
     (V, 3, 4), Ks (V, 3, 3), dists (V, 5), max_radius2s (V,): the cameras; gains (V, H, W),
     zero past a view's own size (views of several sizes share the largest), stamps the
     same shape."""
     totals = np.zeros(gains.shape[0], np.int64)
-    for v in numba.prange(gains.shape[0]):
+    for v in range(gains.shape[0]):
         uv = np.empty((vertices.shape[0], 2))
         project_vertices(vertices, cams_from_world[v], Ks[v], dists[v], near_m,
                          max_radius2s[v], uv)  # fmt: skip

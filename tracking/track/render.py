@@ -14,12 +14,10 @@ distortion is honoured through :class:`~tracking.rig.cameras.Camera`.
   below a pixel for small triangles) and a scanline fill marks every covered pixel centre,
   both compiled by numba in one call per view (`tracking.track.raster`). For the energy it
   can count rather than draw (`covered_gains`: a per-pixel gain summed over the covered
-  pixels, every view in one call, the views shared among numba's threads). The same
-  integers: tracks are identical. Counting rather than drawing saved little (the suite's
-  walk: 91-106 s against 93-102 s, session 23); the views on the 2 cores' threads give the
-  energy 1.6-1.85x the evaluations per second of one thread (`benchmarks/renderers.py`), and
-  `mocap track` of the suite's jump (6 frames, 640x480) 61 -> 46 s and 57 -> 51 s, its
-  joints byte-identical (old and new run in turn, session 27).
+  pixels, every view in one call). The same integers: tracks are identical. What it saves
+  is small: the tracker's energy evaluations per second rose about 10% on the suite's walk,
+  whose `mocap track` took as long within the machine's noise (old and new run in turn:
+  91-106 s against 93-102 s; session 23).
   Triangles with a vertex behind the near plane (``near_m``) are dropped, not clipped.
 * ``open3d-raycast``: Open3D's Embree ray caster on the CPU, one ray through every pixel
   centre (the undistorted ray, so distortion is exact). The reference of the agreement tests.
@@ -185,8 +183,8 @@ def covered_gains(renderer: Any, vertices_in_world: Any, faces: Any, views: View
     """(views,) int: per camera of `views`, the sum of its gain over the pixels the mesh
     covers in that view: what the XOR of a silhouette changes by when the mesh is drawn into
     it (`tracking.track.energy.XorCount`). ``cpu-raster`` sums while it scans, drawing no mask,
-    every view in one compiled call that shares them among the cores; any other renderer
-    draws its masks (`render_views`) and they are summed."""
+    every view in one compiled call; any other renderer draws its masks (`render_views`) and
+    they are summed."""
     if not isinstance(renderer, CpuRasterRenderer):
         return np.array([int(gain[mask].sum()) for gain, mask in zip(
             views.gains, render_views(renderer, vertices_in_world, faces, views.cameras),
