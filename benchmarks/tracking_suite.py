@@ -60,6 +60,16 @@ over 15 would be 17.9 mm. The cartwheel is above 50 mm (not met). The cartwheel'
 session 25 came from an extremity start without the lead inside the shape pass (its track
 differs from frame 0 on); which one, and whether a lead can keep both, is open.
 
+Session 27: the lead only where the start also sets the shape (the first frame's start); a
+recovery, the shape known, takes the lowest XOR (`tracker.start_winner`). All 15 clips
+(``--clips cartwheel``, ``--clips jump climb_steps``, and the other 12 in one run beside the
+Pose2Sim demo): walk 10.6, run 8.0, jump 34.4, **cartwheel 40.3** (frames 11 and 28
+recovered), dance 10.9, boxing 20.5, bend_pickup 49.7, wave 6.7, squat 9.2, sit_stand 6.8,
+climb_steps 8.1, kick 9.2, arms_overhead 7.8, turn_pirouette 11.5, start_walk_stop 12.2:
+mean **16.4 mm**, no clip above 50 mm (met); the Pose2Sim demo 0.827, 100/100 frames (kept).
+Not met: bend_pickup's frame 22 (diverged, unrecovered), and 1 frame/s (0.04-0.44, runs
+sharing the cores; the start and shape pass 48-366 s).
+
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
 with one other job, so frames/s are low bounds). MPJPE (offsets out), worst joint, frames/s,

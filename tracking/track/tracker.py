@@ -33,8 +33,9 @@ upright stances at `init_headings` headings (`upright_starts`), since the fit ca
 into the trunk or lean the trunk to explain a limb, and with poses whose head, hands and feet
 are on the hull's extremities (`tracking.track.extremities`: the best `init_extremity_starts`
 by XOR), since neither reaches a body upside down or sideways: each is refined by the whole
-hierarchy with the limbs' grids over their whole range, and the lowest XOR wins (an extremity
-start only by a clear lead, `_EXTREMITY_LEAD`: near ties went the wrong way). When the shape
+hierarchy with the limbs' grids over their whole range, and the lowest XOR wins (where the
+start also sets the shape, an extremity start only by a clear lead, `_EXTREMITY_LEAD`: near
+ties went the wrong way). When the shape
 is unknown, the shape parameters (the segment lengths, or the skinned body's macro shape and
 clothing: `TrackedModel.shape_parameters`) then come from the outlines, and `calibrate_shape`
 refines them over several frames of a first pass. The rotation angles of the root lock at a 90
@@ -140,8 +141,12 @@ _EXTREMITY_ASSIGNMENTS = 12
 swaps), and its pose 3rd of the 12 by XOR: `init_extremity_starts` 3 refines it."""
 
 _EXTREMITY_LEAD = 0.8
-"""An extremity start wins at a start only with an XOR under this fraction of the best of the
-fit and the upright starts'. Measured at frame 0 (session 26): the extremity starts' best
+"""An extremity start wins a start that also sets the shape (the first frame's, the shape
+unknown) only with an XOR under this fraction of the best of the fit and the upright starts'.
+A start with the shape known (a recovery, in the shape pass or after it) takes the lowest XOR:
+the lead there cost the suite's cartwheel 40.3 -> 62.7 mm (a recovery in the shape pass),
+and the tie it guards against is the shape's (below). Measured at frame 0 (session 26): the
+extremity starts' best
 against the others' was 0.97 on the Pose2Sim demo, where it won without the lead, ended 1.94 m
 tall against 1.85, and cost the clip's median IoU 0.827 -> 0.794; 0.99 and 0.94 on the
 suite's jump and climb_steps (34.4 -> 33.2 and 8.1 -> 8.8 mm: a wash); under 0.8 nowhere
@@ -363,9 +368,10 @@ class TrackConfig:
         default=3,
         metadata={"help": "starts from the visual hull's extremities (head, hands and feet "
                   "assigned, inverse kinematics; tracking.track.extremities), the best by XOR, "
-                  "that compete with the fit and the upright starts at initialisation, "
-                  f"winning only with an XOR under {_EXTREMITY_LEAD} times theirs (0 = none): "
-                  "they reach bodies upside down or sideways"},
+                  "that compete with the fit and the upright starts at initialisation "
+                  "(at the first frame, where the shape is set too, winning only with an XOR "
+                  f"under {_EXTREMITY_LEAD} times theirs) (0 = none): they reach bodies upside "
+                  "down or sideways"},
     )  # fmt: skip
     init_simplex_evals: int = field(
         default=120, metadata={"help": "evaluations of each simplex at initialisation"}
@@ -703,11 +709,10 @@ class SilhouetteTracker:
         refined = [self._refine_all(energy, p.params.copy(), init=True)
                    for p in [*starts, *ends]]  # fmt: skip
         scores = [self._objective(energy, x, self.config.final_level) for x in refined]
-        best = int(np.argmin(scores[:len(starts)]))
-        if ends:  # an extremity start wins by a clear lead only (`_EXTREMITY_LEAD`)
-            lead = len(starts) + int(np.argmin(scores[len(starts):]))
-            if scores[lead] < _EXTREMITY_LEAD * scores[best]:
-                best = lead
+        # When the start also sets the shape, an extremity start wins by a clear lead only;
+        # with the shape known (a recovery), the lowest XOR wins.
+        best = start_winner(scores[:len(starts)], scores[len(starts):],
+                            _EXTREMITY_LEAD if estimate_shape else 1.0)
         x = refined[best]
         if estimate_shape and self.config.init_shape:
             # People differ in proportions: the segment lengths from the silhouettes'
@@ -1326,6 +1331,18 @@ class SilhouetteTracker:
         # A recovered pose has no velocity; the tracked one keeps its own.
         self.history = history if found is None else []
         return best_x, best_e, found
+
+
+def start_winner(others: Sequence[float], extremities: Sequence[float], lead: float) -> int:
+    """Index (into others, then extremities) of the start that wins: the lowest score of
+    `others` (the fit and the upright starts), unless the lowest of `extremities` (the starts
+    from the hull's extremities) is under `lead` times it (`_EXTREMITY_LEAD`, or 1)."""
+    best = int(np.argmin(others))
+    if len(extremities):
+        other = len(others) + int(np.argmin(extremities))
+        if extremities[other - len(others)] < lead * others[best]:
+            return other
+    return best
 
 
 def subjects_in_view(cameras: Sequence[Camera], masks: Sequence[np.ndarray],

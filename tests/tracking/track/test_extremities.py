@@ -21,7 +21,12 @@ from tracking.track.extremities import (
     hull_extremities,
     pose_from_extremities,
 )
-from tracking.track.tracker import SilhouetteTracker, TrackConfig
+from tracking.track.tracker import (
+    _EXTREMITY_LEAD,
+    SilhouetteTracker,
+    TrackConfig,
+    start_winner,
+)
 
 
 def _cartwheel(frames: int) -> list[Pose]:
@@ -117,3 +122,18 @@ def test_the_automatic_start_finds_a_body_upside_down(cartwheel_ws):
     gaps = [max(float(np.linalg.norm(world[NODE_INDEX[n]] - truth[side(n)])) for n in truth)
             for side in (str, _mirrored)]  # fmt: skip
     assert min(gaps) < 0.2, gaps
+
+
+
+def test_an_extremity_start_needs_a_lead_only_where_the_start_sets_the_shape():
+    """`start_winner`: an extremity start 0.9 times the others' best XOR wins a start whose
+    shape is known (a recovery's: lead 1), not the first start, whose shape comes from the
+    winner (`_EXTREMITY_LEAD`: the Pose2Sim demo's subject grew 1.85 -> 1.94 m from such a
+    near tie); a lead of 0.5 wins both."""
+    others, ends = [1000.0, 1100.0, 1050.0], [950.0, 900.0, 990.0]
+    assert _EXTREMITY_LEAD < 0.9
+    assert start_winner(others, ends, lead=1.0) == 4
+    assert start_winner(others, ends, lead=_EXTREMITY_LEAD) == 0
+    assert start_winner(others, [1200.0, 500.0], lead=_EXTREMITY_LEAD) == 4
+    assert start_winner(others, [], lead=1.0) == 0
+    assert start_winner([1100.0, 1000.0], [1000.0], lead=1.0) == 1  # a tie: not the extremity
