@@ -2,8 +2,9 @@
 of three CMU clips, one in Daz naming, synthesised and tracked by the suite's own code
 (`run_clip`: `mocap synth` and `mocap track` with their defaults, the automatic start, scored
 against the subject's joints), at the suite's ``--size 320x240`` to keep `make test` fast:
-73 s on the idle 2-core machine (session 20), the automatic start of each clip most of it (3
-frames take as long, and the shape pass over them is too short: the wave at 281 mm)."""
+73 s on the idle 2-core machine (session 20), 136 s with the extremity starts (session 27;
+152 s in `make test`), the automatic start of each clip most of it (3 frames take as long,
+and the shape pass over them is too short: the wave at 281 mm)."""
 
 from __future__ import annotations
 
