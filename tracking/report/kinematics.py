@@ -58,7 +58,6 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import butter, filtfilt
 from scipy.spatial.transform import Rotation, Slerp
 
 from recon.errors import UserError
@@ -296,6 +295,10 @@ def lowpass(x: np.ndarray, frame_rate: float, cutoff_hz: float, order: int = 2) 
     rest = flat - trend
     pad = min(n - 1, max(3 * (order + 1), int(round(frame_rate / cutoff_hz))))
     extended = np.concatenate([_extension(rest, pad), rest, _extension(rest[::-1], pad)[::-1]])
+    # Imported here: scipy.signal takes 1.8 s to import, which every `mocap` process that
+    # loads the report (a refused input too) paid.
+    from scipy.signal import butter, filtfilt
+
     b, a = butter(order, cutoff_hz / winter_correction(order) / (0.5 * frame_rate))
     out = filtfilt(b, a, extended, axis=0)[pad : pad + n] + trend
     return out.reshape(x.shape)

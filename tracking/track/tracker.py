@@ -81,7 +81,6 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import minimize
 
 from recon.cameras import Camera
 from tracking.body.bvh import rotations_to_channels
@@ -548,6 +547,8 @@ def _simplex(fun: Callable[[np.ndarray], float], x0: np.ndarray, steps: np.ndarr
     over = simplex[1:] > hi
     simplex[1:][over] = (x0[None, :] - np.diag(steps))[over]
     simplex = np.clip(simplex, lo, hi)
+    from scipy.optimize import minimize  # 0.9 s to import: not for `mocap track --help`
+
     result = minimize(fun, x0, method="Nelder-Mead", bounds=list(zip(lo, hi, strict=True)),
                       options={"initial_simplex": simplex, "maxfev": evals, "xatol": 1e-4,
                                "fatol": 0.5})  # fmt: skip
