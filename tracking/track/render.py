@@ -163,19 +163,24 @@ class ViewGains:
 
     def __init__(self, cameras: Sequence[Camera], gains: Sequence[np.ndarray]) -> None:
         self.cameras = list(cameras)
-        self.gains = [np.asarray(g, dtype=np.int8) for g in gains]
-        if [g.shape for g in self.gains] != [(c.height, c.width) for c in self.cameras]:
+        if [np.shape(g) for g in gains] != [(c.height, c.width) for c in self.cameras]:
             raise ValueError("need one (height, width) gain image per camera")
-        shape = (len(self.gains), max((g.shape[0] for g in self.gains), default=0),
-                 max((g.shape[1] for g in self.gains), default=0))
+        shape = (len(self.cameras), max((c.height for c in self.cameras), default=0),
+                 max((c.width for c in self.cameras), default=0))
         self.stacked = np.zeros(shape, np.int8)
-        for view, gain in zip(self.stacked, self.gains, strict=True):
+        for view, gain in zip(self.stacked, gains, strict=True):
             view[:gain.shape[0], :gain.shape[1]] = gain
         self.stamps = np.zeros(shape, np.int64)
         self.cams_from_world = np.array([c.cam_from_world for c in self.cameras]).reshape(-1, 3, 4)
         self.Ks = np.array([c.K for c in self.cameras]).reshape(-1, 3, 3)
         self.dists = np.array([c.dist for c in self.cameras]).reshape(-1, 5)
         self.max_radius2s = np.array([c.max_radius2 for c in self.cameras], dtype=float)
+
+    @property
+    def gains(self) -> list[np.ndarray]:
+        """Per view, its (H, W) gains (views into `stacked`, without the padding)."""
+        return [view[:c.height, :c.width] for view, c in zip(self.stacked, self.cameras,
+                                                             strict=True)]  # fmt: skip
 
 
 def covered_gains(renderer: Any, vertices_in_world: Any, faces: Any, views: ViewGains

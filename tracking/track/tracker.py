@@ -35,9 +35,9 @@ are on the hull's extremities (`tracking.track.extremities`: the best `init_extr
 by XOR), since neither reaches a body upside down or sideways: each is refined by the whole
 hierarchy with the limbs' grids over their whole range, and the lowest XOR wins (where the
 start also sets the shape, an extremity start only by a clear lead, `_EXTREMITY_LEAD`: near
-ties went the wrong way). When the shape
-is unknown, the shape parameters (the segment lengths, or the skinned body's macro shape and
-clothing: `TrackedModel.shape_parameters`) then come from the outlines, and `calibrate_shape`
+ties went the wrong way). When the shape is unknown, the shape parameters (the segment
+lengths, or the skinned body's macro shape and clothing: `TrackedModel.shape_parameters`)
+then come from the outlines, and `calibrate_shape`
 refines them over several frames of a first pass. The rotation angles of the root lock at a 90
 degree pitch, so an upright body should be tracked in a Y-up frame
 (`tracking.rig.cameras.upright_frame`; `mocap track` does). The spine's side bend and twist
@@ -140,17 +140,16 @@ _EXTREMITY_ASSIGNMENTS = 12
 swaps), and its pose 3rd of the 12 by XOR: `init_extremity_starts` 3 refines it."""
 
 _EXTREMITY_LEAD = 0.8
-"""An extremity start wins a start that also sets the shape (the first frame's, the shape
-unknown) only with an XOR under this fraction of the best of the fit and the upright starts'.
-A start with the shape known (a recovery, in the shape pass or after it) takes the lowest XOR:
-the lead there cost the suite's cartwheel 40.3 -> 62.7 mm (a recovery in the shape pass),
-and the tie it guards against is the shape's (below). Measured at frame 0 (session 26): the
-extremity starts' best
-against the others' was 0.97 on the Pose2Sim demo, where it won without the lead, ended 1.94 m
-tall against 1.85, and cost the clip's median IoU 0.827 -> 0.794; 0.99 and 0.94 on the
-suite's jump and climb_steps (34.4 -> 33.2 and 8.1 -> 8.8 mm: a wash); under 0.8 nowhere
-else at frame 0. Where the others fail it leads by far: 0.52 and 0.49 on the suite's
-cartwheel upside down (frames 23 and 27, XOR 0.487 -> 0.255 and 0.564 -> 0.279)."""
+"""An extremity start wins a start that also sets the shape (the first frame's, the shape unknown)
+only with an XOR under this fraction of the best of the fit and the upright starts'. A start
+with the shape known (a recovery, in the shape pass or after it) takes the lowest XOR: the lead
+there cost the suite's cartwheel 40.3 -> 62.7 mm (a recovery in the shape pass), and the tie it
+guards against is the shape's (below). Measured at frame 0 (session 26): the extremity starts'
+best against the others' was 0.97 on the Pose2Sim demo, where it won without the lead, ended
+1.94 m tall against 1.85, and cost the clip's median IoU 0.827 -> 0.794; 0.99 and 0.94 on the
+suite's jump and climb_steps (34.4 -> 33.2 and 8.1 -> 8.8 mm: a wash); under 0.8 nowhere else
+at frame 0. Where the others fail it leads by far: 0.52 and 0.49 on the suite's cartwheel
+upside down (frames 23 and 27, XOR 0.487 -> 0.255 and 0.564 -> 0.279)."""
 
 MEND_BACKOFF_FRAMES = 5
 """Frames after a mend that found nothing without another (`SilhouetteTracker._mend_unexplained`):
@@ -1340,9 +1339,9 @@ def start_winner(others: Sequence[float], extremities: Sequence[float], lead: fl
     from the hull's extremities) is under `lead` times it (`_EXTREMITY_LEAD`, or 1)."""
     best = int(np.argmin(others))
     if len(extremities):
-        other = len(others) + int(np.argmin(extremities))
-        if extremities[other - len(others)] < lead * others[best]:
-            return other
+        k = int(np.argmin(extremities))
+        if extremities[k] < lead * others[best]:
+            return len(others) + k
     return best
 
 
