@@ -263,6 +263,12 @@ class FitConfig:
         metadata={"help": "a pose parameter held at 0, not fitted (repeatable): spine_bend "
                   "or spine_twist", "metavar": "PARAM"},
     )  # fmt: skip
+    workers: int = field(
+        default=0,
+        metadata={"help": "processes that fit the trunk's orientations side by side "
+                  "(recon.parallel.fork_map): 0 = one per core this process may use, 1 = this "
+                  "process alone; the fit is the same"},
+    )  # fmt: skip
 
     def __post_init__(self) -> None:
         from recon.errors import UserError
@@ -270,6 +276,8 @@ class FitConfig:
         for name in self.hold:
             if name not in _HOLDABLE:
                 raise UserError(f"--hold {name}: only {' and '.join(_HOLDABLE)} can be held")
+        if self.workers < 0:
+            raise UserError(f"--workers must be >= 0, got {self.workers}")
         if self.fallback_orientations < 0:
             raise UserError(f"--fallback-orientations {self.fallback_orientations}: expected 0 "
                             "or more")
@@ -825,7 +833,10 @@ def fit_body(points: np.ndarray, config: FitConfig | None = None,
     superquadric, the superquadric fit is the start of that model's refinement
     (`tracking.fit.skinned_fit`), and the acceptance test is the refined model's.
     """
+    from recon.parallel import fork_map, workers_for
+
     config = config or FitConfig()
+    workers = workers_for(config.workers)
     start = time.perf_counter()
     points = check_cloud(points)
     rng = np.random.default_rng(config.seed)
@@ -858,14 +869,17 @@ def fit_body(points: np.ndarray, config: FitConfig | None = None,
     def trunk_fits(centred: bool) -> list[tuple[float, np.ndarray]]:
         """(cost, x) of the trunk fitted from every orientation, upright and bent forward
         (the fold moves the axes), each started as `_initial_x` with `centred`."""
-        fitted = []
-        for rotation, bend in itertools.product(rotations, _SPINE_CANDIDATES):
+        combinations = list(itertools.product(rotations, _SPINE_CANDIDATES))
+
+        def fitted(index: int) -> tuple[float, np.ndarray]:
+            rotation, bend = combinations[index]
             x = _initial_x(rotation, coarse, extent, centred)
             x[PARAM_INDEX["spine_flex"]] = np.deg2rad(bend)
             x = problem.icp(x, coarse, trunk, rounds=5, steps=3, loss="cauchy",
                             samples=trunk_samples)  # fmt: skip
-            fitted.append((problem.cost(x, coarse, trunk_samples, keep_model=0.5), x))
-        return fitted
+            return problem.cost(x, coarse, trunk_samples, keep_model=0.5), x
+
+        return fork_map(fitted, len(combinations), workers)
 
     roots = trunk_fits(centred=False)
     candidates = len(roots)
@@ -912,10 +926,11 @@ def fit_body(points: np.ndarray, config: FitConfig | None = None,
         `cfg`), and the search stops once one is accepted. legs: when given, both legs are
         first set together (`best_leg_pair` with these candidates). Returns the candidates
         scored."""
-        scored = 0
-        for tried, x in enumerate(_orientations(roots, count, rotations[0][:, 1])):
-            if tried >= judged_from and any(v[0] for v in verdicts(fits)):
-                break
+        starts = _orientations(roots, count, rotations[0][:, 1])
+
+        def fitted(index: int) -> tuple[np.ndarray, int]:
+            """The fit from starts[index], and the candidates it scored."""
+            x, scored = starts[index], 0
             if legs is not None:
                 x = best_leg_pair(problem, x, coarse, legs)
                 scored += len(legs) ** 2
@@ -925,6 +940,16 @@ def fit_body(points: np.ndarray, config: FitConfig | None = None,
             x = search_limbs(problem, x, coarse, grid=cfg.arm_grid)
             x = problem.icp(x, points, everything, rounds=config.iterations, steps=3)
             scored += 2 * sum(len(_candidates(limb, cfg.arm_grid)) for limb in _LIMBS)
+            return x, scored
+
+        # The fits before the first judged one are made whatever they give: side by side.
+        ahead = fork_map(fitted, min(judged_from, len(starts)), workers)
+        scored = 0
+        for tried in range(len(starts)):
+            if tried >= judged_from and any(v[0] for v in verdicts(fits)):
+                break
+            x, n = ahead[tried] if tried < len(ahead) else fitted(tried)
+            scored += n
             fits.append((problem.cost(x, points), x))
             if tried >= judged_from:
                 judge(x, cfg)  # none accepted so far: this orientation's fit is judged anyway

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from recon.errors import UserError
+from recon.parallel import settings_of
 from recon.workspace import Timer, Workspace, atomic_output, fingerprint, write_json_atomic
 from tracking.body.model import BONES, NODE_NAMES
 from tracking.fit.body_fit import FitConfig, FitResult, check_cloud, fit_body
@@ -203,7 +204,7 @@ def fit_workspace(
     upstream = ws.require_step(
         "dense", f"no dense cloud yet; run `mocap dense {ws.root}` first", f"mocap dense {ws.root}")
     config = dataclasses.replace(config, metric=False)
-    settings = {"subject": dataclasses.asdict(subject), "fit": dataclasses.asdict(config)}
+    settings = {"subject": dataclasses.asdict(subject), "fit": settings_of(config)}
     fp = fingerprint("fit", settings, upstream.fingerprint)
     paths = {"json": ws.body_dir / "fit.json", "ply": ws.body_dir / "fit.ply",
              "rrd": ws.logs_dir / "fit.rrd"}  # fmt: skip

@@ -57,6 +57,7 @@ import cv2
 import numpy as np
 
 from recon.errors import UserError
+from recon.parallel import settings_of, single_blas_thread
 from recon.progress import bar as progress_bar
 from recon.workspace import Timer, Workspace, atomic_output, fingerprint, write_json_atomic
 from tracking.body.model import BONES, NODE_NAMES, Pose, TrackedModel, pose_in_frame
@@ -168,7 +169,7 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         if init_pose is None:
             raise UserError(f"{step.init_pose}: has no pose")
     upstream = [ws.step(n).fingerprint for n in ("synth", "silhouettes") if ws.step(n)]
-    settings = {"step": dataclasses.asdict(step), "track": dataclasses.asdict(config),
+    settings = {"step": dataclasses.asdict(step), "track": settings_of(config),
                 "frames": [frames[0], frames[-1], len(frames)]}  # fmt: skip
     fp = fingerprint("track", settings, upstream)
     outputs = {"joints": ws.tracks_dir / "joints.csv", "pose": ws.tracks_dir / "pose.json",
@@ -220,7 +221,8 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
     logged = {frames[i] for i in np.unique(np.linspace(
         0, len(frames) - 1, min(step.logged_images, len(frames))).round().astype(int))}
     shape_pass = Timer()  # its seconds stay 0 without a shape pass
-    with Timer() as timer, _Recorder(ws, upright, frame_rate, logged) as recorder:
+    with (Timer() as timer, _Recorder(ws, upright, frame_rate, logged) as recorder,
+          single_blas_thread()):
         if init_model is None and config.shape_frames > 1:
             shape_frames = frames[first:first + config.shape_frames]
             bar = progress_bar(len(shape_frames), "shape", "frame", enabled=progress)

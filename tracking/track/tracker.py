@@ -402,6 +402,12 @@ class TrackConfig:
                   "(MakeHuman's skinned body, its macro shape and loose clothing refined from "
                   "the silhouettes) or superquadric (the thesis' rigid segments)"},
     )  # fmt: skip
+    workers: int = field(
+        default=0,
+        metadata={"help": "processes that fit and refine the candidate starts side by side "
+                  "(the automatic start's and a recovery's; recon.parallel.fork_map): 0 = one per "
+                  "core this process may use, 1 = this process alone; the poses are the same"},
+    )  # fmt: skip
 
     def __post_init__(self) -> None:
         from recon.errors import UserError
@@ -420,7 +426,7 @@ class TrackConfig:
                           ("init_simplex_evals", 1), ("passes", 1), ("shape_stride", 1),
                           ("shape_frames", 0), ("contour_iterations", 0),
                           ("init_headings", 0), ("init_extremity_starts", 0),
-                          ("high_xor_frames", 0), ("xor_window", 1)):
+                          ("high_xor_frames", 0), ("xor_window", 1), ("workers", 0)):
             if getattr(self, name) < low:
                 raise UserError(f"{flag(name)} must be >= {low}, got {getattr(self, name)}")
         for name in ("prior_weight", "twist_weight", "range_gain", "spike_xor_factor",
@@ -680,7 +686,7 @@ class SilhouetteTracker:
                                          max_median_residual=1.0,
                                          max_unexplained_cluster=1.0,
                                          min_limb_support=0.0, metric=False,
-                                         hold=_START_HELD),
+                                         hold=_START_HELD, workers=self.config.workers),
                        up=up)  # fmt: skip
         estimate_shape = self.shape is None
         if estimate_shape:
@@ -706,8 +712,7 @@ class SilhouetteTracker:
         # Neither reaches a body upside down or sideways: poses whose head, hands
         # and feet are on the hull's extremities compete too.
         ends = self._extremity_starts(energy, points)
-        refined = [self._refine_all(energy, p.params.copy(), init=True)
-                   for p in [*starts, *ends]]  # fmt: skip
+        refined = self._refine_starts(energy, [*starts, *ends])
         scores = [self._objective(energy, x, self.config.final_level) for x in refined]
         # When the start also sets the shape, an extremity start wins by a clear lead only;
         # with the shape known (a recovery), the lowest XOR wins.
@@ -729,6 +734,25 @@ class SilhouetteTracker:
         self.history = []
         return Pose(x), message
 
+    def _refine_starts(self, energy: SilhouetteEnergy, starts: Sequence[Pose]) -> list[np.ndarray]:
+        """Each of `starts` refined by the whole hierarchy, the limbs' grids over their whole
+        range (`_refine_all` with init): independent of one another, so side by side in
+        `TrackConfig.workers` processes (`fork_map`), with the same results as one by one."""
+        from recon.parallel import fork_map, workers_for
+
+        def refine(index: int) -> tuple[np.ndarray, int]:
+            before = self.evaluations
+            x = self._refine_all(energy, starts[index].params.copy(), init=True)
+            count, self.evaluations = self.evaluations - before, before
+            return x, count
+
+        results = fork_map(refine, len(starts), workers_for(self.config.workers))
+        self.evaluations += sum(count for _, count in results)
+        # What `_refine_all` leaves behind (the start's priors), set here too when the
+        # refinements ran in other processes.
+        self._prepare(energy, init=True)
+        return [x for x, _ in results]
+
     def _extremity_starts(self, energy: SilhouetteEnergy, points: np.ndarray) -> list[Pose]:
         """The `init_extremity_starts` poses of lowest XOR at `search_level` among those whose
         end sites reach the visual hull's extremities (`tracking.track.extremities`: surface
@@ -738,9 +762,14 @@ class SilhouetteTracker:
         if count == 0:
             return []
         assert self.shape is not None
+        from recon.parallel import fork_map, workers_for
+
         ends = hull_extremities(points, self.config.voxel_m)
-        poses = [pose_from_extremities(ends, a, self.shape, self._free(), points.mean(axis=0))[0]
-                 for a in extremity_assignments(ends, self.shape, _EXTREMITY_ASSIGNMENTS)]
+        assignments = extremity_assignments(ends, self.shape, _EXTREMITY_ASSIGNMENTS)
+        free, centre = self._free(), points.mean(axis=0)
+        poses = fork_map(lambda i: pose_from_extremities(ends, assignments[i], self.shape, free,
+                                                         centre)[0],
+                         len(assignments), workers_for(self.config.workers))  # fmt: skip
         scores = [energy(p, self.config.search_level) for p in poses]
         self.evaluations += len(poses)
         return [poses[i] for i in np.argsort(scores, kind="stable")[:count]]
@@ -986,13 +1015,15 @@ class SilhouetteTracker:
             valid &= inside.reshape(len(xs), -1).all(axis=1)
         return valid
 
-    def _refine_all(self, energy: SilhouetteEnergy, x: np.ndarray, init: bool = False,
-                    change: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
-        """Root, trunk, limbs, root again: the hierarchy of thesis 6.2.5."""
+    def _prepare(self, energy: SilhouetteEnergy, x: np.ndarray | None = None,
+                 init: bool = False) -> None:  # fmt: skip
+        """The state a refinement of the frame of `energy` reads: the dilated silhouettes of
+        the samples' test (`_valid`) and the priors (`_prior`: temporal, centred on the
+        prediction `x` unless at initialisation, and the twists')."""
         import cv2
 
         cfg = self.config
-        x = self._held_at_zero(x)
+
         # Where a view cannot tell (unknown pixels), a joint counts as inside its silhouette.
         def inside(mask: np.ndarray, known: np.ndarray | None) -> np.ndarray:
             grown = cv2.dilate(mask.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
@@ -1000,7 +1031,6 @@ class SilhouetteTracker:
 
         self._dilated = [[inside(m, k) for m, k in zip(masks, known, strict=True)]
                          for masks, known in zip(energy.masks, energy.known, strict=True)]
-        coarse = min(cfg.levels - 1, cfg.search_level + 1)
         # Temporal prior (thesis: "prediction"): a deviation of one `prior_scale` from the
         # predicted pose costs `prior_weight` of the silhouette area, in XOR pixels.
         area = _known_area(energy.masks[0], energy.known[0])
@@ -1008,7 +1038,7 @@ class SilhouetteTracker:
         scale = self.frame_interval_s * np.where(np.arange(N_POSE_PARAMS) < 3,
                                                  cfg.prior_scale_m_s,
                                                  np.deg2rad(cfg.prior_scale_deg_s))
-        if init:
+        if init or x is None:
             centre, weight = np.zeros(N_POSE_PARAMS), np.zeros(N_POSE_PARAMS)
         else:
             centre, weight = x.copy(), cfg.prior_weight * area / scale**2
@@ -1021,6 +1051,14 @@ class SilhouetteTracker:
                                     out=centre[_TWISTS].copy(), where=total > 0)
         weight[_TWISTS] = weight[_TWISTS] + twist
         self._prior = (centre, weight)
+
+    def _refine_all(self, energy: SilhouetteEnergy, x: np.ndarray, init: bool = False,
+                    change: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+        """Root, trunk, limbs, root again: the hierarchy of thesis 6.2.5."""
+        cfg = self.config
+        x = self._held_at_zero(x)
+        self._prepare(energy, x, init)
+        coarse = min(cfg.levels - 1, cfg.search_level + 1)
         if init or change is None:
             change = np.zeros(N_POSE_PARAMS)
             root_steps = np.array([0.05, 0.05, 0.05, 0.08, 0.08, 0.15])

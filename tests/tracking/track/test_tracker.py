@@ -126,6 +126,27 @@ def test_refine_finds_the_pose_of_one_frame_from_a_wrong_start():
         SilhouetteTracker(CAMERAS).refine(masks, truth)
 
 
+def test_the_starts_refined_side_by_side_are_those_refined_in_turn():
+    # `TrackConfig.workers`: the start's candidates refined in forked processes give the
+    # poses, the evaluation count and the priors of the refinement in this process.
+    truth = _walk(3)[2]
+    masks = _masks(truth)
+    starts = [Pose(truth.params + np.where(np.arange(N_POSE_PARAMS) == i, 0.1, 0.0))
+              for i in (0, PARAM_INDEX["l_shoulder_rx"], PARAM_INDEX["r_knee_flex"])]
+    found = {}
+    for workers in (1, 2):
+        tracker = SilhouetteTracker(CAMERAS, dataclasses.replace(SUPERQUADRIC, workers=workers),
+                                    shape=SHAPE)  # fmt: skip
+        with tracker._searching_start():
+            xs = tracker._refine_starts(tracker._energy(masks), starts)
+        found[workers] = (np.array(xs), tracker.evaluations, tracker._prior)
+    np.testing.assert_array_equal(found[1][0], found[2][0])
+    assert found[1][1] == found[2][1] > 100
+    for serial, forked in zip(found[1][2], found[2][2], strict=True):
+        np.testing.assert_array_equal(serial, forked)
+    assert _mpjpe_mm(Pose(found[2][0][1]), SHAPE, truth) < 10
+
+
 def test_a_bent_arm_turned_on_its_axis_is_found_from_a_folded_start():
     """With the upper arm's axial twist sampled too (`init_twists` 3) and its best few
     samples refined (`init_starts` 3; neither is the default), the start's limb grid finds an

@@ -1,0 +1,93 @@
+"""Independent CPU-bound jobs on this machine's cores, in forked processes.
+
+The jobs of a step that share large read-only state (a frame's silhouettes, pyramids and
+compiled renderers) are run by `fork_map`: the children inherit that state from the fork,
+copy-on-write, and only the jobs' indices and results cross a pipe. Processes rather than
+threads: the jobs are numpy and Python between short compiled calls, which the GIL would
+serialise, and an idle child blocks on its pipe instead of spinning (OpenMP's threads spin
+between calls, measured 3.5 times slower per evaluation than one thread each when two such
+processes share 2 cores; session 27).
+
+BLAS: OpenBLAS starts a thread per core for the products numpy hands it, which then spin between
+calls; the tracker's products are small (an outline system's 26 columns, a skinning matrix), so
+`single_blas_thread` runs it, and `fork_map`'s children, on one. Measured (session 28, `mocap
+track --init-pose` of the suite's walk, 30 frames): alone, 31.9-34.9 s and 45-48 s of CPU with
+OpenBLAS's threads against 28.2-32.1 s and 28-31 s with one; two such runs side by side (as in
+`make test`, or a forked start's children), 50.5-56.2 s against 33.4-37.6 s.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import multiprocessing
+import os
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+# The job of the pool being forked: a child inherits it (nothing is pickled but indices and
+# results). One pool at a time per process; a child does not fork again.
+_job: Callable[[int], object] | None = None
+_in_child = False
+
+
+def available_cores() -> int:
+    """The cores this process may run on (its CPU affinity, which containers and ``taskset``
+    restrict), at least 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def workers_for(setting: int) -> int:
+    """The processes a ``--workers`` setting asks for: 0 means `available_cores`."""
+    if setting < 0:
+        raise ValueError(f"workers must be >= 0, got {setting}")
+    return setting or available_cores()
+
+
+def settings_of(config: Any) -> dict[str, Any]:
+    """A config dataclass's fields that a step's fingerprint holds: all but ``workers``, which
+    changes the speed, not the result (a step is not run again for it)."""
+    return {k: v for k, v in dataclasses.asdict(config).items() if k != "workers"}
+
+
+def fork_map(job: Callable[[int], T], count: int, workers: int) -> list[T]:
+    """``[job(0), ..., job(count - 1)]``, computed by up to `workers` forked processes (in
+    order, one job at a time each, the next to the first idle one); in this process when one
+    worker is asked for, there is one job, fork is unavailable (not on POSIX), or this
+    process is itself a `fork_map` child. `job` must not depend on side effects of the other
+    jobs: each child's changes to its copy of the state are lost, so return what the parent
+    needs. An exception in a job is raised here."""
+    workers = min(workers, count)
+    if workers <= 1 or _in_child or "fork" not in multiprocessing.get_all_start_methods():
+        return [job(i) for i in range(count)]
+    global _job
+    _job = job
+    try:
+        with multiprocessing.get_context("fork").Pool(workers, initializer=_enter_child) as pool:
+            return pool.map(_run, range(count), chunksize=1)
+    finally:
+        _job = None
+
+
+def single_blas_thread() -> contextlib.AbstractContextManager[object]:
+    """A context in which numpy's and scipy's BLAS (OpenBLAS) use one thread (module
+    docstring); as it was on leaving."""
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api="blas")
+
+
+def _enter_child() -> None:
+    global _in_child
+    _in_child = True
+    single_blas_thread()  # for the child's life: it ends with the map
+
+
+def _run(index: int) -> object:
+    assert _job is not None
+    return _job(index)

@@ -1,0 +1,48 @@
+"""`recon.parallel.fork_map`: the jobs' results in order, computed in forked processes."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from recon.parallel import available_cores, fork_map, workers_for
+
+
+def test_fork_map_returns_the_jobs_results_in_order_from_other_processes():
+    state = {"touched": 0}
+
+    def job(index: int) -> tuple[int, int]:
+        state["touched"] += 1  # a child's copy: the parent's state stays as it was
+        return index * index, os.getpid()
+
+    results = fork_map(job, 7, 2)
+    assert [square for square, _ in results] == [i * i for i in range(7)]
+    assert {pid for _, pid in results} - {os.getpid()} == {pid for _, pid in results}
+    assert state["touched"] == 0
+    # One worker: in this process, one job after another, side effects kept.
+    assert fork_map(job, 3, 1) == [(0, os.getpid()), (1, os.getpid()), (4, os.getpid())]
+    assert state["touched"] == 3
+
+
+def test_a_job_that_fails_raises_in_the_caller_and_a_child_does_not_fork_again():
+    def job(index: int) -> int:
+        if index == 2:
+            raise ValueError("job 2 failed")
+        return index
+
+    with pytest.raises(ValueError, match="job 2 failed"):
+        fork_map(job, 4, 2)
+
+    def nested(index: int) -> list[int]:  # in a child: the inner map runs there, in turn
+        return [pid for pid in fork_map(lambda _: os.getpid(), 2, 2)]
+
+    for pids in fork_map(nested, 2, 2):
+        assert len(set(pids)) == 1 and pids[0] != os.getpid()
+
+
+def test_workers_setting():
+    assert workers_for(0) == available_cores() >= 1
+    assert workers_for(3) == 3
+    with pytest.raises(ValueError, match="workers"):
+        workers_for(-1)
