@@ -9,9 +9,11 @@ PY := $(VENV)/bin/python
 # built once: 6:49 against 11:08 in one process on these 2-core machines (session 16). The
 # longest files first (tests/conftest.py's HEAVY_FIRST), not xdist's order by test count.
 PYTEST_WORKERS ?= -n 2 --dist loadfile --no-loadscope-reorder
-# One BLAS thread per test process: OpenBLAS's extra threads spin, and two processes side by
-# side ran 1.5x slower with them (recon/parallel.py).
+# One core per test process, the two already busy: one BLAS thread (OpenBLAS's extra threads
+# spin; two processes side by side ran 1.5x slower with them, recon/parallel.py), and no
+# processes forked for the tracker's start (`--workers`' default, MOCAP_WORKERS).
 export OPENBLAS_NUM_THREADS ?= 1
+export MOCAP_WORKERS ?= 1
 # Shared libraries Open3D loads at import (libusb), for rendering (GL, EGL, OpenMP), and for its
 # Filament renderer on the CPU (Vulkan loader + Mesa's lavapipe).
 APT_PACKAGES := libusb-1.0-0 libgl1 libegl1 libgomp1 libvulkan1 mesa-vulkan-drivers

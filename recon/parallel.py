@@ -43,10 +43,22 @@ def available_cores() -> int:
 
 
 def workers_for(setting: int) -> int:
-    """The processes a ``--workers`` setting asks for: 0 means `available_cores`."""
+    """The processes a ``--workers`` setting asks for: 0 means the environment's
+    ``MOCAP_WORKERS`` when set (as ``OMP_NUM_THREADS`` sets OpenMP's threads: `make test` sets
+    1, its two test processes already busy on the 2 cores), else `available_cores`."""
     if setting < 0:
         raise ValueError(f"workers must be >= 0, got {setting}")
-    return setting or available_cores()
+    if setting:
+        return setting
+    value = os.environ.get("MOCAP_WORKERS", "").strip()
+    if value:
+        if not value.isdigit() or int(value) < 1:
+            from recon.errors import UserError
+
+            raise UserError(f"MOCAP_WORKERS={value!r}: expected a whole number >= 1 (the "
+                            "processes of --workers 0), or unset it")
+        return int(value)
+    return available_cores()
 
 
 def settings_of(config: Any) -> dict[str, Any]:
@@ -59,11 +71,13 @@ def fork_map(job: Callable[[int], T], count: int, workers: int) -> list[T]:
     """``[job(0), ..., job(count - 1)]``, computed by up to `workers` forked processes (in
     order, one job at a time each, the next to the first idle one); in this process when one
     worker is asked for, there is one job, fork is unavailable (not on POSIX), or this
-    process is itself a `fork_map` child. `job` must not depend on side effects of the other
+    process is itself a `fork_map` child or a daemon (a Dask worker of `mocap batch`, which
+    may not have children). `job` must not depend on side effects of the other
     jobs: each child's changes to its copy of the state are lost, so return what the parent
     needs. An exception in a job is raised here."""
     workers = min(workers, count)
-    if workers <= 1 or _in_child or "fork" not in multiprocessing.get_all_start_methods():
+    if (workers <= 1 or _in_child or multiprocessing.current_process().daemon
+            or "fork" not in multiprocessing.get_all_start_methods()):
         return [job(i) for i in range(count)]
     global _job
     _job = job

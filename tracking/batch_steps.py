@@ -8,6 +8,7 @@ batch --help` load every step, so this module imports the pipeline only inside t
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from collections.abc import Mapping
 from contextlib import AbstractContextManager
 from pathlib import Path
@@ -71,14 +72,17 @@ class TrackStep(BaseBatchStep):
         from recon.configs import add_config_arguments
         from tracking.track.tracker import TrackConfig
 
-        add_config_arguments(parser, TrackConfig)
+        # A batch task tracks on the core Dask gives it: `mocap batch --workers` is the
+        # batch's, and the tracker forks no processes of its own (`TrackConfig.workers` 1).
+        add_config_arguments(parser, TrackConfig, exclude=("workers",))
 
     def settings(self, args: argparse.Namespace | None) -> Any:
-        """A `TrackConfig`."""
+        """A `TrackConfig`, its `workers` 1."""
         from recon.configs import config_from_args
         from tracking.track.tracker import TrackConfig
 
-        return TrackConfig() if args is None else config_from_args(TrackConfig, args)
+        config = TrackConfig() if args is None else config_from_args(TrackConfig, args)
+        return dataclasses.replace(config, workers=1)
 
     def run(self, workspace: Path, settings: Any, *, overwrite: bool) -> StepResult:
         from recon.workspace import Workspace

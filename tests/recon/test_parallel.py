@@ -6,6 +6,7 @@ import os
 
 import pytest
 
+from recon.errors import UserError
 from recon.parallel import available_cores, fork_map, workers_for
 
 
@@ -41,8 +42,31 @@ def test_a_job_that_fails_raises_in_the_caller_and_a_child_does_not_fork_again()
         assert len(set(pids)) == 1 and pids[0] != os.getpid()
 
 
-def test_workers_setting():
+def test_workers_setting(monkeypatch: pytest.MonkeyPatch):
+    monkeypatch.delenv("MOCAP_WORKERS", raising=False)
     assert workers_for(0) == available_cores() >= 1
     assert workers_for(3) == 3
     with pytest.raises(ValueError, match="workers"):
         workers_for(-1)
+    monkeypatch.setenv("MOCAP_WORKERS", "1")  # as `make test` sets it
+    assert workers_for(0) == 1
+    assert workers_for(2) == 2  # a setting given wins
+    for bad in ("0", "two", "-1"):
+        monkeypatch.setenv("MOCAP_WORKERS", bad)
+        with pytest.raises(UserError, match="MOCAP_WORKERS"):
+            workers_for(0)
+
+
+def test_a_daemon_process_runs_the_jobs_itself():
+    # A Dask worker (`mocap batch`) is a daemon, which may not have children.
+    import multiprocessing
+
+    def in_daemon(queue) -> None:
+        queue.put(fork_map(lambda _: os.getpid(), 3, 2) == [os.getpid()] * 3)
+
+    context = multiprocessing.get_context("fork")
+    queue = context.Queue()
+    child = context.Process(target=in_daemon, args=(queue,), daemon=True)
+    child.start()
+    assert queue.get(timeout=30)
+    child.join(timeout=30)

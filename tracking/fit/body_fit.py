@@ -266,8 +266,8 @@ class FitConfig:
     workers: int = field(
         default=0,
         metadata={"help": "processes that fit the trunk's orientations side by side "
-                  "(recon.parallel.fork_map): 0 = one per core this process may use, 1 = this "
-                  "process alone; the fit is the same"},
+                  "(recon.parallel.fork_map): 0 = $MOCAP_WORKERS if set, else one per core "
+                  "this process may use; 1 = this process alone; the fit is the same"},
     )  # fmt: skip
 
     def __post_init__(self) -> None:
