@@ -70,6 +70,15 @@ mean **16.4 mm**, no clip above 50 mm (met); the Pose2Sim demo 0.827, 100/100 fr
 Not met: bend_pickup's frame 22 (diverged, unrecovered), and 1 frame/s (0.04-0.44, runs
 sharing the cores; the start and shape pass 48-366 s).
 
+Session 28: the start's candidates (the hull fit's orientations, the extremity starts' inverse
+kinematics, the 12 refinements) on both cores in forked processes (`--workers`, default every
+core), and the tracking on one BLAS thread: the same joints, byte for byte, on walk, jump and
+cartwheel (its two recoveries included), `mocap track` of session 27's 30-frame workspaces,
+the code before and after in turn, nothing else running: walk 117-118 -> 96-97 s (0.26 ->
+0.31 frames/s; start and shape pass 86-87 -> 65-66 s), jump 96 -> 63 s (0.31 -> 0.48), cartwheel
+179 -> 132 s (0.17 -> 0.23). 1 frame/s: still not met; what is left is the start and shape
+pass (41-66 s here) and 0.56-0.82 s per frame after it.
+
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
 with one other job, so frames/s are low bounds). MPJPE (offsets out), worst joint, frames/s,

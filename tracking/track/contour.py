@@ -27,7 +27,6 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from scipy.spatial import cKDTree
 
 from recon.cameras import Camera
 from tracking.body.model import (
@@ -216,6 +215,8 @@ def _outline_system(posed: _Posed, cameras: Sequence[Camera], targets: Sequence[
         b += (jac * weight[:, None]).T @ sdf
         # Image -> model: each outline point to its nearest projected contour point.
         if len(target.outline):
+            from scipy.spatial import cKDTree  # here: 0.4 s that `mocap track --help` skips
+
             dist, nearest = cKDTree(uv[idx]).query(target.outline)
             res = uv[idx][nearest] - target.outline
             weight = 1.0 / (1.0 + (dist / scale) ** 2)
