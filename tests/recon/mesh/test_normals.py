@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import open3d as o3d
+import pytest
 
 from recon.mesh.normals import face_normals, vertex_normals
 
@@ -32,3 +33,24 @@ def test_a_vertex_on_no_triangle_has_a_zero_normal() -> None:
     vertices = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [5.0, 5.0, 5.0]])
     normals = vertex_normals(vertices, np.array([[0, 1, 2]]))
     np.testing.assert_array_equal(normals, [[0, 0, 1], [0, 0, 1], [0, 0, 1], [0, 0, 0]])
+
+
+def _numpy_vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """The numpy formula that `vertex_normals` compiled (before session 28): its reference."""
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    per_corner = np.repeat(np.cross(b - a, c - a), 3, axis=0)
+    summed = np.stack([np.bincount(faces.ravel(), weights=per_corner[:, d],
+                                   minlength=len(vertices)) for d in range(3)], axis=1)
+    return summed / np.maximum(np.linalg.norm(summed, axis=1), 1e-300)[:, None]
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_vertex_normals_are_the_numpy_formulas_floats(dtype: type) -> None:
+    # Compiled, the same floats: the tracker's results stay byte for byte what they were.
+    rng = np.random.default_rng(7)
+    vertices = rng.normal(size=(500, 3)).astype(dtype)
+    faces = rng.integers(0, 500, size=(2000, 3)).astype(np.int32)
+    np.testing.assert_array_equal(vertex_normals(vertices, faces),
+                                  _numpy_vertex_normals(vertices, faces))
+    with pytest.raises(IndexError, match="0..499"):
+        vertex_normals(vertices, np.vstack([faces, [[0, 1, 500]]]))
