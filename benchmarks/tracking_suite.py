@@ -72,13 +72,13 @@ sharing the cores; the start and shape pass 48-366 s).
 
 Session 28: the start's candidates (the hull fit's orientations, the extremity starts' inverse
 kinematics, the 12 refinements) on both cores in forked processes (`--workers`, default every
-core), and the tracking on one BLAS thread: joints.csv the same byte for byte on walk, jump
-and cartwheel (its two recoveries included; pose.json's numbers differ by up to 7e-14, from
-the one BLAS thread's sums; the forks alone change no bit), `mocap track` of session 27's 30-frame workspaces,
-the code before and after in turn, nothing else running: walk 117-118 -> 96-97 s (0.26 ->
-0.31 frames/s; start and shape pass 86-87 -> 65-66 s), jump 96 -> 63 s (0.31 -> 0.48), cartwheel
-179 -> 132 s (0.17 -> 0.23). 1 frame/s: still not met; what is left is the start and shape
-pass (41-66 s here) and 0.56-0.82 s per frame after it.
+core), and the tracking on one BLAS thread: joints.csv the same byte for byte on walk, jump and
+cartwheel (its two recoveries included; pose.json's numbers differ by up to 7e-14, from the one
+BLAS thread's sums; the forks alone change no bit), `mocap track` of session 27's 30-frame
+workspaces, the code before and after in turn, nothing else running: walk 117-118 -> 96-97 s
+(0.26 -> 0.31 frames/s; start and shape pass 86-87 -> 65-66 s), jump 96 -> 63 s (0.31 -> 0.48),
+cartwheel 179 -> 132 s (0.17 -> 0.23). 1 frame/s: still not met; what is left is the start and
+shape pass (41-66 s here) and 0.56-0.82 s per frame after it.
 
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
