@@ -70,3 +70,19 @@ def test_a_daemon_process_runs_the_jobs_itself():
     child.start()
     assert queue.get(timeout=30)
     child.join(timeout=30)
+
+
+def test_single_blas_thread_limits_openblas_and_restores_it():
+    import numpy as np  # noqa: F401  (loads numpy's OpenBLAS)
+    from threadpoolctl import threadpool_info
+
+    from recon.parallel import single_blas_thread
+
+    def blas_threads() -> list[int]:
+        return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+    before = blas_threads()
+    assert before, "numpy's BLAS is not visible to threadpoolctl"
+    with single_blas_thread():
+        assert blas_threads() == [1] * len(before)
+    assert blas_threads() == before

@@ -783,11 +783,17 @@ class SilhouetteTracker:
         refiner = ContourRefiner(energy.model, energy.cameras[level], energy.masks[level],
                                  energy.renderer, ContourConfig(iterations=20),
                                  known=energy.known[level])  # fmt: skip
+        from recon.parallel import fork_map, workers_for
+
+        starts = [x, swap_sides(x, "leg"), swap_sides(x, "arm"),
+                  swap_sides(swap_sides(x, "leg"), "arm")]  # fmt: skip
+        free = self._free()
+        # Independent: side by side (`TrackConfig.workers`), the same results.
+        refined = fork_map(lambda i: refiner.refine(self._held_at_zero(starts[i]), free,
+                                                    lambda p: energy(Pose(p), level)),
+                           len(starts), workers_for(self.config.workers))  # fmt: skip
         best, best_e = x, np.inf
-        for start in (x, swap_sides(x, "leg"), swap_sides(x, "arm"),
-                      swap_sides(swap_sides(x, "leg"), "arm")):  # fmt: skip
-            y, e, n = refiner.refine(self._held_at_zero(start), self._free(),
-                                     lambda p: energy(Pose(p), level))  # fmt: skip
+        for y, e, n in refined:
             self.evaluations += n
             if e < best_e:
                 best, best_e = y, e
