@@ -68,6 +68,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from recon.mesh.normals import vertex_normals
+from recon.parallel import fork_map, workers_for
 from tracking.body.bvh import rotations_to_channels
 from tracking.body.model import (
     ADDED_PARAMS,
@@ -833,8 +834,6 @@ def fit_body(points: np.ndarray, config: FitConfig | None = None,
     superquadric, the superquadric fit is the start of that model's refinement
     (`tracking.fit.skinned_fit`), and the acceptance test is the refined model's.
     """
-    from recon.parallel import fork_map, workers_for
-
     config = config or FitConfig()
     workers = workers_for(config.workers)
     start = time.perf_counter()

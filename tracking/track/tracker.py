@@ -79,10 +79,12 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from recon.cameras import Camera
+from recon.parallel import fork_map, workers_for
 from tracking.body.bvh import rotations_to_channels
 from tracking.body.model import (
     ADDED_PARAMS,
@@ -735,19 +737,22 @@ class SilhouetteTracker:
         self.history = []
         return Pose(x), message
 
+    def _side_by_side(self, job: Callable[[int], Any], count: int) -> list[Any]:
+        """``[job(0), ..., job(count - 1)]`` of independent jobs, in `TrackConfig.workers`
+        forked processes (`fork_map`): the same results as one by one."""
+        return fork_map(job, count, workers_for(self.config.workers))
+
     def _refine_starts(self, energy: SilhouetteEnergy, starts: Sequence[Pose]) -> list[np.ndarray]:
         """Each of `starts` refined by the whole hierarchy, the limbs' grids over their whole
         range (`_refine_all` with init): independent of one another, so side by side in
         `TrackConfig.workers` processes (`fork_map`), with the same results as one by one."""
-        from recon.parallel import fork_map, workers_for
-
         def refine(index: int) -> tuple[np.ndarray, int]:
             before = self.evaluations
             x = self._refine_all(energy, starts[index].params.copy(), init=True)
             count, self.evaluations = self.evaluations - before, before
             return x, count
 
-        results = fork_map(refine, len(starts), workers_for(self.config.workers))
+        results = self._side_by_side(refine, len(starts))
         self.evaluations += sum(count for _, count in results)
         # What `_refine_all` leaves behind (the start's priors), set here too when the
         # refinements ran in other processes.
@@ -763,14 +768,11 @@ class SilhouetteTracker:
         if count == 0:
             return []
         assert self.shape is not None
-        from recon.parallel import fork_map, workers_for
-
         ends = hull_extremities(points, self.config.voxel_m)
         assignments = extremity_assignments(ends, self.shape, _EXTREMITY_ASSIGNMENTS)
         free, centre = self._free(), points.mean(axis=0)
-        poses = fork_map(lambda i: pose_from_extremities(ends, assignments[i], self.shape, free,
-                                                         centre)[0],
-                         len(assignments), workers_for(self.config.workers))  # fmt: skip
+        poses = self._side_by_side(lambda i: pose_from_extremities(
+            ends, assignments[i], self.shape, free, centre)[0], len(assignments))
         scores = [energy(p, self.config.search_level) for p in poses]
         self.evaluations += len(poses)
         return [poses[i] for i in np.argsort(scores, kind="stable")[:count]]
@@ -783,15 +785,12 @@ class SilhouetteTracker:
         refiner = ContourRefiner(energy.model, energy.cameras[level], energy.masks[level],
                                  energy.renderer, ContourConfig(iterations=20),
                                  known=energy.known[level])  # fmt: skip
-        from recon.parallel import fork_map, workers_for
-
         starts = [x, swap_sides(x, "leg"), swap_sides(x, "arm"),
                   swap_sides(swap_sides(x, "leg"), "arm")]  # fmt: skip
         free = self._free()
         # Independent: side by side (`TrackConfig.workers`), the same results.
-        refined = fork_map(lambda i: refiner.refine(self._held_at_zero(starts[i]), free,
-                                                    lambda p: energy(Pose(p), level)),
-                           len(starts), workers_for(self.config.workers))  # fmt: skip
+        refined = self._side_by_side(lambda i: refiner.refine(
+            self._held_at_zero(starts[i]), free, lambda p: energy(Pose(p), level)), len(starts))
         best, best_e = x, np.inf
         for y, e, n in refined:
             self.evaluations += n
