@@ -139,7 +139,8 @@ class TrackCommand:
             print(f"warning: a limb is likely misplaced in {len(summary['unexplained'])} of "
                   f"{summary['frames']} frames (pose.json: unexplained)", file=sys.stderr)
         if summary.get("recovered"):  # older runs lack it
-            print(f"recovered  frames {summary['recovered']} (found again by the start search)")
+            print(f"recovered  frames {summary['recovered']} (found again by the start search, "
+                  "or back to this subject's usual XOR after a divergence)")
         if summary.get("diverged"):
             print(f"diverged   frames {summary['diverged']} (far above this subject's usual XOR "
                   "and not found again: their poses are kept, but not trusted)")

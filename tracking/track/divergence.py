@@ -12,6 +12,11 @@ fractions of the recent frames it accepted and flags a frame
 Frames above ``high_factor`` times the median do not enter it, so a slide cannot raise its own
 reference. A bar is never closer than ``min_margin`` (a fraction of the silhouette area) above
 the median: on clean renders the median is ~2% and a few pixels of difference would double it.
+
+After a divergence the start search found nothing better for (`diverge`), the level the model
+reaches is the reference, and the watch keeps the high bar of the reference before it: the
+first frame back under that bar (`returned`; the tracker also asks that the visual hull be
+explained) is the track found again.
 """
 
 from __future__ import annotations
@@ -50,6 +55,9 @@ class XorWatch:
         self.accepted: deque[float] = deque(maxlen=max(config.window, 1))
         self.streak = 0  # frames in a row above the high bar, not accepted
         self.start: float | None = None  # the XOR of the last restart's pose
+        self.diverged: tuple[int, float] | None = None
+        """The first divergence not yet behind the track (`diverge`): its frame, and the high
+        bar of the reference before it; None after a start, a recovery or `returned`."""
 
     def reference(self) -> float | None:
         """Median XOR fraction of the accepted frames; until there are `MIN_REFERENCE_FRAMES`,
@@ -102,10 +110,30 @@ class XorWatch:
             self.streak = 0
 
     def restart(self, xor_fraction: float | None = None) -> None:
-        """Forget the reference (a new start; or what the model reaches now, when a recovery
-        found nothing better than a high XOR)."""
+        """Forget the reference and any divergence (a new start, or a recovery)."""
         self.accepted.clear()
         self.streak = 0
         self.start = xor_fraction
+        self.diverged = None
         if xor_fraction is not None:
             self.accepted.append(xor_fraction)
+
+    def diverge(self, frame: int, xor_fraction: float) -> None:
+        """A divergence the start search found nothing better for: what the model reaches now
+        is the reference from here (`restart`), and the high bar of the reference before it
+        is kept for `returned` (the first divergence's, until the track is back under it)."""
+        kept = self.diverged
+        if kept is None:
+            bar = self.bar(self.config.high_factor)
+            kept = None if bar is None else (frame, bar)
+        self.restart(xor_fraction)
+        self.diverged = kept
+
+    def returned(self, xor_fraction: float) -> tuple[int, float] | None:
+        """After a `diverge`, whether a tracked frame of this XOR fraction is back under the
+        high bar of the reference before the divergence: that divergence's frame and the bar
+        (then forgotten), or None."""
+        if self.diverged is None or xor_fraction > self.diverged[1]:
+            return None
+        back, self.diverged = self.diverged, None
+        return back

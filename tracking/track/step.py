@@ -349,7 +349,8 @@ def status_lists(results: Sequence[FrameResult]) -> dict[str, list[int]]:
     """pose.json's summary of the frames' `FrameResult.status`: the frames lost (no pose),
     diverged (a divergence that the start search found nothing better for: the best pose is
     kept, but not trusted), recovered (found again by the start search after a divergence
-    or after frames without a pose), absent (no pose: no camera has a silhouette) and
+    or after frames without a pose, or by the tracking after a divergence: back under the XOR
+    of before it, the visual hull explained), absent (no pose: no camera has a silhouette) and
     two_subjects (no pose: two subjects or more in view, status "two-subjects")."""
     return {name.replace("-", "_"): [r.frame for r in results if r.status == name]
             for name in ("lost", "diverged", "recovered", "absent", "two-subjects")}

@@ -55,15 +55,17 @@ grids over their whole range) and from the visual hull (`initialise`), and the c
 lowest XOR, the tracked pose included, is kept: the frame is "recovered" when the search found
 a pose that is no divergence, "diverged" (its best pose kept, not trusted; its XOR the
 reference from then on) when only the relative tests still fail, and "lost" (no joints; never
-NaN) when the absolute one does. `FrameResult.status` says which (`STATUSES`). A frame where
-no camera has a silhouette is "absent" (the subject left the view): no pose and no search; the
-next frame with silhouettes starts afresh from the visual hull and is "recovered" (or "lost"
-when that start's XOR is over the absolute bar an earlier start set). A frame
-whose visual hull has two separate parts of human size or more (`subjects_in_view`: two
-subjects apart, both in every camera's view) is "two-subjects": no pose, rather than a fit to
-the merged blob. It is looked for where a second subject shows: at a start from the hull, and
-on a divergence before the start search (the other subject's silhouettes are unexplained, so
-the XOR jumps).
+NaN) when the absolute one does. After a "diverged" frame, the first tracked frame back under
+the high bar of the reference before it, its visual hull explained (`max_unexplained_share`),
+is "recovered" too: the track is found again, by the tracking itself. `FrameResult.status`
+says which (`STATUSES`). A frame where no camera has a silhouette is "absent" (the subject
+left the view): no pose and no search; the next frame with silhouettes starts afresh from the
+visual hull and is "recovered" (or "lost" when that start's XOR is over the absolute bar an
+earlier start set). A frame whose visual hull has two separate parts of human size or more
+(`subjects_in_view`: two subjects apart, both in every camera's view) is "two-subjects": no
+pose, rather than a fit to the merged blob. It is looked for where a second subject shows: at
+a start from the hull, and on a divergence before the start search (the other subject's
+silhouettes are unexplained, so the XOR jumps).
 
 The search ranges scale with the frame interval (`frame_interval_s`, seconds), not with the
 frame index: a limb grid's half-range is `range_gain` times the change over the two preceding
@@ -473,7 +475,9 @@ class FrameResult:
     event: str = ""  # "init ...", "recovered ...", "diverged: ...", "lost: ...", "absent: ..."
     status: str = "tracked"
     """One of `STATUSES`: "init" (a start), "tracked", "recovered" (a divergence, or the first
-    frame after lost or absent ones, found again by the start search), "diverged" (a
+    frame after lost or absent ones, found again by the start search; or, after a "diverged"
+    frame, the first tracked frame back under the XOR bar of before it, with the visual hull
+    explained: `XorWatch.returned`), "diverged" (a
     divergence the search found nothing better for: the best pose is kept, not trusted),
     "lost" (no pose), "absent" (no pose: no camera has a silhouette, the subject is out of
     view) or "two-subjects" (no pose: the visual hull has two or more separate parts of human
@@ -1130,6 +1134,17 @@ class SilhouetteTracker:
             share = self.unexplained_share(masks, result.pose)
             result = dataclasses.replace(result, unexplained_share=share,
                                          unexplained=share > limit)
+            back = (self.watch.returned(result.xor_fraction)
+                    if result.status == "tracked" and not result.unexplained else None)
+            if back is not None:
+                # The track found again after a divergence the start search found nothing
+                # better for: back to this subject's usual XOR, and the hull explained.
+                event = (f"recovered: XOR {result.xor_fraction:.1%} of the silhouette, back "
+                         f"under {back[1]:.1%} (this subject's usual XOR before the divergence "
+                         f"at frame {back[0]}), with the visual hull explained")
+                result = dataclasses.replace(
+                    result, status="recovered",
+                    event="; ".join(part for part in (event, result.event) if part))
         return result
 
     def unexplained_share(self, masks: Sequence[np.ndarray], pose: Pose) -> float:
@@ -1320,11 +1335,15 @@ class SilhouetteTracker:
                          f"{event}")
         except TrackingLost as exc:
             return self._lost(frame, float("nan"), area, start, str(exc), status=exc.status)
-        if status in ("init", "diverged") or self._lost_since is not None:
-            # A new start, or the level the model now reaches: the reference from here.
-            self.watch.restart(e / area)
+        if status == "diverged":
+            # The level the model now reaches: the reference from here (`XorWatch.diverge`).
+            self.watch.diverge(frame, e / area)
+        elif status == "init" or self._lost_since is not None:
+            self.watch.restart(e / area)  # a new start
         else:
             self.watch.accept(e / area)
+            if status == "recovered":
+                self.watch.diverged = None  # found again: no divergence before it is open
         if status != "diverged" and self.watch.streak == 0:
             self._last_good = (frame, x.copy())
         self._lost_since, self._gap_statuses, self._tracked_any = None, set(), True

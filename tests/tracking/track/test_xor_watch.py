@@ -78,3 +78,30 @@ def test_the_start_is_the_reference_until_enough_frames_follow_it():
     # Without a start's value (the shape pass's restart) nothing speaks until 3 frames.
     watch.restart()
     assert watch.reference() is None and watch.verdict(0.5) == ""
+
+
+def test_after_a_divergence_the_first_frame_back_under_the_former_bar_is_found_again():
+    """The suite's turn_pirouette (60 frames, session 29): frame 41 diverged at 24.0% over a
+    median of 14.9%, the start search found nothing better, and the frames after it went back
+    to 15% by themselves. The watch keeps the bar of before the divergence (the high one,
+    1.3 x 14.9%) through later divergences, until a frame is back under it; a start or a
+    recovery by the start search forgets it."""
+    watch = XorWatch(WATCH)
+    _verdicts(watch, [0.15, 0.14, 0.16, 0.15])
+    bar = WATCH.high_factor * 0.15
+    watch.diverge(41, 0.24)
+    assert watch.reference() == pytest.approx(0.24)  # the level reached is the reference
+    assert watch.returned(bar + 0.01) is None
+    watch.accept(bar + 0.01)
+    watch.diverge(43, 0.30)  # a second divergence keeps the first's frame and bar
+    assert watch.diverged == (41, pytest.approx(bar))
+    back = watch.returned(bar - 0.01)
+    assert back == (41, pytest.approx(bar)) and watch.diverged is None
+    assert watch.returned(0.10) is None  # found once
+    # A new start forgets the divergence; so does a diverge with no reference to keep.
+    watch.diverge(50, 0.3)
+    watch.restart(0.12)
+    assert watch.diverged is None and watch.returned(0.05) is None
+    fresh = XorWatch(WATCH)
+    fresh.diverge(3, 0.3)
+    assert fresh.diverged is None
