@@ -330,6 +330,23 @@ def subject_sized(parts: Sequence[HullPart]) -> list[HullPart]:
             if p.height_m >= SUBJECT_MIN_HEIGHT_M and p.volume_m3 >= SUBJECT_MIN_VOLUME_M3]
 
 
+def hull_diameter(points: np.ndarray) -> float:
+    """The largest distance between two of the (N, 3) points (metres): the longest extent of
+    a visual hull in any direction, its height when the subject stands, and the reach of a
+    body bent over or lying, whose extent along up is far below its height."""
+    points = np.asarray(points, float)
+    if len(points) < 2:
+        return 0.0
+    try:
+        from scipy.spatial import ConvexHull, QhullError
+
+        points = points[ConvexHull(points).vertices]  # the farthest pair is on the hull
+    except (QhullError, ValueError):  # flat or too few points: all of them
+        pass
+    gaps = points[:, None] - points[None]
+    return float(np.sqrt(np.max(np.einsum("ijk,ijk->ij", gaps, gaps))))
+
+
 def surface_voxels(occupied: np.ndarray, n: int) -> np.ndarray:
     """(n**3,) bool: occupied voxels with at least one empty 6-neighbour."""
     occupied = occupied.reshape(n, n, n)

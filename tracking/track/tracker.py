@@ -110,6 +110,7 @@ from tracking.silhouettes.hull import (
     HullPart,
     check_voxel_grid,
     cut_by_border,
+    hull_diameter,
     hull_min_views,
     hull_parts,
     rays_meeting_point,
@@ -697,15 +698,7 @@ class SilhouetteTracker:
                        up=up)  # fmt: skip
         estimate_shape = self.shape is None
         if estimate_shape:
-            # A hull carved by few views is fatter than the body, and the fit grows the
-            # model to fill it (1.86-2.02 m for the ~1.75 m subject of the Pose2Sim demo,
-            # whose hull is 1.74 m tall): a standing subject is hardly taller than the
-            # hull along up. (Capping at the extent itself cost the synthetic walk 5 mm:
-            # the lengths' refinement then settled elsewhere.)
-            height = fit.shape.height
-            if up is not None:
-                extent = float(np.ptp(points @ up)) + self.config.voxel_m
-                height = min(height, 1.05 * extent)
+            height = start_height(fit.pose, fit.shape, points, up, self.config.voxel_m)
             self.model = self.body.tracking_model(height)
         # The hull fit can put a limb inside the trunk or lean the trunk to explain a
         # limb: upright bodies at several headings compete with it (each refined by the
@@ -1394,6 +1387,41 @@ class SilhouetteTracker:
         # A recovered pose has no velocity; the tracked one keeps its own.
         self.history = history if found is None else []
         return best_x, best_e, found
+
+
+UPRIGHT_TRUNK_DEG = 30.0
+"""A hull fit whose trunk (pelvis to neck) is within this angle of up is of a subject upright:
+its hull's extent along up is its height (`start_height`). Measured: 0-15 degrees at the first
+frame of the 15 clips of the motion suite (30 and 60 frames: other cameras) but the
+cartwheel, and 12 on the Pose2Sim demo; 48-49 on the cartwheel, which starts bent over."""
+
+
+def start_height(fit: Pose, shape: BodyShape, points: np.ndarray, up: np.ndarray | None,
+                 voxel_m: float) -> float:  # fmt: skip
+    """The height of a start from the visual hull `points` (N, 3): the hull fit's (`fit`,
+    `shape`), at most 1.05 times the subject's extent in the hull. A hull carved by few views
+    is fatter than the body, and the fit grows the model to fill it (1.86-2.02 m for the
+    ~1.75 m subject of the Pose2Sim demo, whose hull is 1.74 m tall). (Capping at the extent
+    itself cost the synthetic walk 5 mm: the lengths' refinement then settled elsewhere.)
+
+    The extent is along up when the fit is upright (`UPRIGHT_TRUNK_DEG`): a standing subject
+    is hardly taller than its hull there. A subject bent over is far taller than that, and is
+    capped at the hull's longest extent (`hull_diameter`): the suite's cartwheel starts so,
+    its hull 1.23 m along up and 1.52 m long; capped at 1.29 m, the shape pass left a subject
+    of 1.45 m (82.7 mm MPJPE over 60 frames). Not the longest extent for all: a running
+    stride's is its diagonal, 1.61 m for 1.56 m along up, and the suite's run, started 5 cm
+    taller, was tracked at 92 mm instead of 17 (session 29)."""
+    height = shape.height
+    if up is None:
+        return height
+    nodes = forward_kinematics(fit, shape)[[NODE_INDEX["pelvis"], NODE_INDEX["neck"]], :3, 3]
+    trunk = nodes[1] - nodes[0]
+    cos_tilt = float(trunk @ up) / max(float(np.linalg.norm(trunk)), 1e-9)
+    if cos_tilt >= np.cos(np.deg2rad(UPRIGHT_TRUNK_DEG)):
+        extent = float(np.ptp(points @ up))
+    else:
+        extent = hull_diameter(points)
+    return min(height, 1.05 * (extent + voxel_m))
 
 
 def start_winner(others: Sequence[float], extremities: Sequence[float], lead: float) -> int:

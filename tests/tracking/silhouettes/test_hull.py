@@ -12,6 +12,7 @@ from tracking.rig.cameras import ring_cameras
 from tracking.silhouettes.hull import (
     HullCheckConfig,
     consistent_silhouettes,
+    hull_diameter,
     hull_silhouettes,
     rays_meeting_point,
     surface_voxels,
@@ -176,3 +177,15 @@ def test_the_coarse_to_fine_candidates_carve_the_very_hull_of_the_whole_cube(see
         kept, _ = carve(cameras, masks, candidates, **settings)
         assert full.any() and len(index) < 0.5 * len(points)
         np.testing.assert_array_equal(np.flatnonzero(full), index[kept])
+
+
+def test_hull_diameter_is_the_largest_distance_between_two_points():
+    """Against every pair (scipy's pdist), on a cloud, a flat set (no convex hull: all
+    points) and a single point."""
+    from scipy.spatial.distance import pdist
+
+    cloud = np.random.default_rng(3).normal(size=(500, 3)) * [0.2, 0.8, 0.15]
+    assert hull_diameter(cloud) == pytest.approx(pdist(cloud).max())
+    flat = np.c_[np.random.default_rng(4).random((50, 2)), np.zeros(50)]
+    assert hull_diameter(flat) == pytest.approx(pdist(flat).max())
+    assert hull_diameter(np.zeros((1, 3))) == 0.0
