@@ -80,6 +80,28 @@ workspaces, the code before and after in turn, nothing else running: walk 117-11
 cartwheel 179 -> 132 s (0.17 -> 0.23). 1 frame/s: still not met; what is left is the start and
 shape pass (41-66 s here) and 0.56-0.82 s per frame after it.
 
+Session 29, on a 2-core AMD EPYC about 3 times as fast as session 28's machine (the walk's 30
+frames: 29.7 s against 96-97 s, the same code), the script's default of 60 frames, which the
+sessions before ran at 30 only (the 60-frame clips are other data: synth places the ring of
+cameras for the whole clip, so the subject is smaller in the cartwheel's views), ``--trackers
+current``, all 15 clips, nothing else running. At the session's start (80abd77): mean 20.9 mm;
+**cartwheel 82.7** (the start's height capped at 1.29 m by a hull 1.23 m tall along up, as the
+subject starts bent over: 1.45 m after the shape pass, 35.5% median XOR; frame 11 diverged,
+unrecovered; 14 frames over 100 mm, all flagged); turn_pirouette 22.5 (frame 41 diverged at
+43 mm, the right wrist 300-376 mm off in frames 42-45, flagged unexplained, and back at 16 mm
+in frame 46 by itself, but called "recovered" only at frame 59): not met on both. 1.30-1.81
+frames/s but the cartwheel (0.76) and the pirouette (1.01). After 578be39 (the first tracked
+frame back under the bar of before a divergence, its hull explained, is "recovered") and
+ccd2847 (a start bent over, its trunk over 30 degrees from up, is capped by the hull's longest
+extent): walk 11.0, run 17.4, jump 34.2, **cartwheel 46.9** (1.58 m; frame 9 diverged, 10
+recovered by the tracking, 25, 35 and 39 by the start search; 27 flagged, none over 100 mm),
+dance 10.3, boxing 13.0, bend_pickup 49.5, wave 5.9, squat 10.7, sit_stand 15.1, climb_steps
+14.9, kick 5.0, arms_overhead 8.7, turn_pirouette 22.5 (41 diverged, **46 recovered**),
+start_walk_stop 12.0: mean **18.5 mm**, no clip above 50 mm, none unrecovered, no frame over
+100 mm; joints.csv byte-identical to the session's start on the 14 clips but the cartwheel.
+1.27-1.73 frames/s (start and shape pass 16-23 s, then 2.3-4.1 frames/s), the pirouette 1.04,
+the cartwheel **0.71** (four recoveries and 27 mends): 1 frame/s not met on the cartwheel.
+
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
 with one other job, so frames/s are low bounds). MPJPE (offsets out), worst joint, frames/s,
