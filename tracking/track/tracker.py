@@ -1315,7 +1315,10 @@ class SilhouetteTracker:
                 # frame between the high and spike bars counts towards a slide).
                 if found is None or self.watch.verdict(e / area):
                     status = "diverged"
-                    event = (f"diverged: {why}; the start search found nothing better "
+                    # A pose the search found can be better and still a divergence: say which.
+                    searched = ("found nothing better" if found is None else
+                                f"found {found}, still a divergence")
+                    event = (f"diverged: {why}; the start search {searched} "
                              f"(XOR {e / area:.1%}): its best pose is kept, and its XOR is "
                              "this subject's reference from here")
                 else:

@@ -134,9 +134,10 @@ def test_a_track_back_under_the_bar_after_a_divergence_is_found_again():
     the hull check (``max_unexplained_share`` 0) nothing confirms it: tracked."""
     from tests.tracking.track.test_tracker import CAMERAS, SHAPE, _masks, _mpjpe_mm, _walk
 
-    def track(config: TrackConfig) -> tuple[list[FrameResult], list[float]]:
+    def track(config: TrackConfig, found: str | None = None
+              ) -> tuple[list[FrameResult], list[float]]:  # fmt: skip
         tracker = SilhouetteTracker(CAMERAS, config, shape=SHAPE)
-        tracker._recover = lambda masks, energy, x, e: (x, e, None)
+        tracker._recover = lambda masks, energy, x, e: (x, e, found)
         results, errors = [], []
         for frame, pose in enumerate(truth):
             masks = _masks(pose)
@@ -153,6 +154,11 @@ def test_a_track_back_under_the_bar_after_a_divergence_is_found_again():
     assert statuses == ["init", "tracked", "tracked", "tracked", "diverged", "recovered",
                         "tracked"], (statuses, [round(r.xor_fraction, 3) for r in results])
     assert "before the divergence at frame 4" in results[5].event, results[5].event
+    assert "the start search found nothing better" in results[4].event, results[4].event
+    # A pose the search found that is still a divergence is named, not "nothing better".
+    named, _ = track(TrackConfig(body="superquadric"), found="the stand-in")
+    assert named[4].status == "diverged" and "found the stand-in, still a divergence" in \
+        named[4].event, named[4].event
     assert max(errors) < 25, errors  # the pose was right all along: the ghost is not a limb
     unchecked, _ = track(TrackConfig(body="superquadric", max_unexplained_share=0.0))
     assert [r.status for r in unchecked][4:] == ["diverged", "tracked", "tracked"]
