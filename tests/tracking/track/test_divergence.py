@@ -73,26 +73,34 @@ def _arms_out(pose: Pose) -> Pose:
     return Pose.from_dict(values)
 
 
-def _track_jumps(config: TrackConfig, recover=None):
-    """A small synthetic scene (the superquadric body, 4 views at 320x240): frames 6-7 show
-    the subject with the arms suddenly out (silhouettes of another pose, as when a track
-    jumps), frame 8 the walk again. Tracked from the true start, with `recover` in place of
-    the start search when given: the frames' results and MPJPE (mm) against what they show."""
-    from tests.tracking.track.test_tracker import CAMERAS, SHAPE, _masks, _mpjpe_mm, _walk
+def _track_shown(config: TrackConfig, shown: list[Pose], recover=None, masks_of=None):
+    """A small synthetic scene (the superquadric body, 4 views at 320x240) showing the poses
+    `shown` (their silhouettes, or ``masks_of(frame, pose)``), tracked from the true start, with
+    `recover` in place of the start search when given: the frames' results and MPJPE (mm)
+    against what they show."""
+    from tests.tracking.track.test_tracker import CAMERAS, SHAPE, _masks, _mpjpe_mm
 
-    truth = _walk(9)
-    shown = [_arms_out(p) if k in (6, 7) else p for k, p in enumerate(truth)]
     tracker = SilhouetteTracker(CAMERAS, config, shape=SHAPE)
     if recover is not None:
         tracker._recover = lambda masks, energy, x, e: recover(tracker, energy, x, e)
     results, errors = [], []
     for frame, pose in enumerate(shown):
         tracker.shown = pose
-        result = tracker.track(frame, _masks(pose), init=truth[0] if frame == 0 else None)
+        masks = _masks(pose) if masks_of is None else masks_of(frame, pose)
+        result = tracker.track(frame, masks, init=shown[0] if frame == 0 else None)
         assert result.pose is not None, result.event
         results.append(result)
         errors.append(_mpjpe_mm(result.pose, SHAPE, pose))
     return results, errors
+
+
+def _track_jumps(config: TrackConfig, recover=None):
+    """`_track_shown` of a walk whose frames 6-7 show the subject with the arms suddenly out
+    (silhouettes of another pose, as when a track jumps), frame 8 the walk again."""
+    from tests.tracking.track.test_tracker import _walk
+
+    return _track_shown(config, [_arms_out(p) if k in (6, 7) else p
+                                 for k, p in enumerate(_walk(9))], recover)  # fmt: skip
 
 
 @pytest.mark.parametrize("relative", [True, False])
@@ -132,23 +140,18 @@ def test_a_track_back_under_the_bar_after_a_divergence_is_found_again():
     reference. Frame 5 is clean: the track, back under the bar of before the divergence, its
     visual hull explained, is "recovered" by the tracking itself, and so said once. Without
     the hull check (``max_unexplained_share`` 0) nothing confirms it: tracked."""
-    from tests.tracking.track.test_tracker import CAMERAS, SHAPE, _masks, _mpjpe_mm, _walk
+    from tests.tracking.track.test_tracker import _masks, _walk
+
+    def ghost(frame: int, pose: Pose) -> list[np.ndarray]:
+        masks = _masks(pose)
+        if frame == 4:
+            masks[0][100:130, 20:40] = True  # the ghost, left of the subject
+        return masks
 
     def track(config: TrackConfig, found: str | None = None
               ) -> tuple[list[FrameResult], list[float]]:  # fmt: skip
-        tracker = SilhouetteTracker(CAMERAS, config, shape=SHAPE)
-        tracker._recover = lambda masks, energy, x, e: (x, e, found)
-        results, errors = [], []
-        for frame, pose in enumerate(truth):
-            masks = _masks(pose)
-            if frame == 4:
-                masks[0] = masks[0].copy()
-                masks[0][100:130, 20:40] = True  # the ghost, left of the subject
-            results.append(tracker.track(frame, masks, init=truth[0] if frame == 0 else None))
-            errors.append(_mpjpe_mm(results[-1].pose, SHAPE, pose))
-        return results, errors
+        return _track_shown(config, _walk(7), lambda t, energy, x, e: (x, e, found), ghost)
 
-    truth = _walk(7)
     results, errors = track(TrackConfig(body="superquadric"))
     statuses = [r.status for r in results]
     assert statuses == ["init", "tracked", "tracked", "tracked", "diverged", "recovered",
