@@ -79,7 +79,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -1307,7 +1307,9 @@ class SilhouetteTracker:
                 # so, and track no merged blob. Else the start search again, from the last
                 # good pose and the hull.
                 self._one_subject(masks)
-                x, e, found = self._recover(masks, energy, x, e)
+                x, e, found = self._recover(
+                    masks, energy, x, e,
+                    enough=lambda e_y: e_y <= limit and not self.watch.verdict(e_y / area))
                 if e > limit:
                     return self._lost(frame, e, area, start, f"{why}; the start search found "
                                       f"nothing under it (XOR {e / area:.1%})")
@@ -1364,29 +1366,32 @@ class SilhouetteTracker:
 
     def _recover(self, masks: Sequence[np.ndarray], energy: SilhouetteEnergy,
                  x: np.ndarray | None, e: float,
+                 enough: Callable[[float], bool] | None = None,
                  ) -> tuple[np.ndarray | None, float, str | None]:  # fmt: skip
         """After a divergence or lost frames, the start search again: from the last good pose
-        (and its left/right swaps) with the limbs' grids over their whole range, and from the
+        (and its left/right swaps) with the limbs' grids over their whole range, then from the
         visual hull (`initialise`). Returns the candidate of lowest XOR, the tracked pose `x`
         (energy `e`; None and inf after lost frames) included, its energy, and where it came
-        from (None: `x`)."""
+        from (None: `x`). Cheapest first: when the last good pose's candidate is `enough` (its
+        energy no divergence), the hull's search (8 of a recovery's 9 s on the suite's
+        cartwheel) does not run."""
         history = self.history
-        candidates: list[tuple[str, np.ndarray]] = []
-        if self._last_good is not None:
-            good_frame, good = self._last_good
-            seed = self._best_hypothesis(energy, good).params
-            candidates.append((f"the last good pose (frame {good_frame})",
-                               self._refine_all(energy, seed, init=True)))
-        try:
-            pose, _ = self.initialise(masks)
-            candidates.append(("the visual hull", pose.params))
-        except TrackingLost:
-            pass
         best_x, best_e, found = x, e, None
-        for name, y in candidates:
+
+        def consider(name: str, y: np.ndarray) -> None:
+            nonlocal best_x, best_e, found
             e_y = energy(Pose(y))
             if e_y < best_e:
                 best_x, best_e, found = y, e_y, name
+
+        if self._last_good is not None:
+            good_frame, good = self._last_good
+            seed = self._best_hypothesis(energy, good).params
+            consider(f"the last good pose (frame {good_frame})",
+                     self._refine_all(energy, seed, init=True))
+        if found is None or enough is None or not enough(best_e):
+            with suppress(TrackingLost):  # no visual hull: the last good pose's alone
+                consider("the visual hull", self.initialise(masks)[0].params)
         # A recovered pose has no velocity; the tracked one keeps its own.
         self.history = history if found is None else []
         return best_x, best_e, found

@@ -82,7 +82,8 @@ def _track_shown(config: TrackConfig, shown: list[Pose], recover=None, masks_of=
 
     tracker = SilhouetteTracker(CAMERAS, config, shape=SHAPE)
     if recover is not None:
-        tracker._recover = lambda masks, energy, x, e: recover(tracker, energy, x, e)
+        tracker._recover = lambda masks, energy, x, e, enough=None: recover(
+            tracker, energy, x, e)
     results, errors = [], []
     for frame, pose in enumerate(shown):
         tracker.shown = pose
@@ -165,6 +166,39 @@ def test_a_track_back_under_the_bar_after_a_divergence_is_found_again():
     assert max(errors) < 25, errors  # the pose was right all along: the ghost is not a limb
     unchecked, _ = track(TrackConfig(body="superquadric", max_unexplained_share=0.0))
     assert [r.status for r in unchecked][4:] == ["diverged", "tracked", "tracked"]
+
+
+def test_a_recovery_searches_the_hull_only_when_the_last_good_pose_is_not_enough():
+    """The start search of a recovery tries the last good pose first (its limbs over their
+    whole range), and the visual hull's search (a stand-in here that finds the pose shown,
+    counted) only when that candidate is not `enough` (a stand-in verdict here): the walk's
+    arms jump out at frame 6, and the search runs from frame 5's pose."""
+    from tests.tracking.track.test_tracker import CAMERAS, SHAPE, _masks, _mpjpe_mm, _walk
+
+    walk = _walk(7)
+    shown = _arms_out(walk[6])
+    tracker = SilhouetteTracker(CAMERAS, TrackConfig(body="superquadric"), shape=SHAPE)
+    for frame, pose in enumerate(walk[:6]):
+        assert tracker.track(frame, _masks(pose), init=walk[0] if frame == 0 else None).pose
+    searched = []
+
+    def hull_search(masks, init=None):
+        searched.append(init)
+        return shown, "the stand-in"
+
+    tracker.initialise = hull_search
+    masks = _masks(shown)
+    energy = tracker._energy(masks)
+    tracked = tracker.history[-1]
+    before = energy(Pose(tracked))
+    for enough, searches in ((lambda e: True, 0), (lambda e: False, 1), (None, 1)):
+        searched.clear()
+        x, e, found = tracker._recover(masks, energy, tracked, before, enough=enough)
+        assert len(searched) == searches, (enough, found)
+        if searches:  # the stand-in's pose, exactly
+            assert found == "the visual hull" and _mpjpe_mm(Pose(x), SHAPE, shown) < 1
+        else:  # better than the tracked pose, so it is the candidate
+            assert found == "the last good pose (frame 5)" and e < before, (found, e, before)
 
 
 @pytest.mark.slow  # two start searches: about a minute on 2 shared cores
