@@ -1209,17 +1209,29 @@ class SilhouetteTracker:
         prior = self._prior
         best, best_xor, found = x, energy(Pose(x), cfg.final_level), ""
         start_xor = best_xor
-        for limb in nearest[:2]:
+        limbs = nearest[:2]
+
+        def search(index: int) -> tuple[np.ndarray, float, float, int]:
+            """The pose with limbs[index] searched, its XOR, its hull's unexplained share, and
+            the energy evaluations it took."""
+            before = self.evaluations
             weight = prior[1].copy()
-            weight[_LIMBS[limb][0][2]] = 0.0  # the limb's axial twist
+            weight[_LIMBS[limbs[index]][0][2]] = 0.0  # the limb's axial twist
             self._prior = (prior[0], weight)
             try:
-                y = self._limb(energy, x, limb, np.zeros(N_POSE_PARAMS), cfg.search_level,
-                               wide=True, cfg=wide)  # fmt: skip
+                y = self._limb(energy, x, limbs[index], np.zeros(N_POSE_PARAMS),
+                               cfg.search_level, wide=True, cfg=wide)  # fmt: skip
             finally:
                 self._prior = prior
-            xor = energy(Pose(y), cfg.final_level)
-            if xor < best_xor and self.unexplained_part(masks, Pose(y))[0] < share:
+            count, self.evaluations = self.evaluations - before, before
+            return (y, energy(Pose(y), cfg.final_level),
+                    self.unexplained_part(masks, Pose(y))[0], count)  # fmt: skip
+
+        # Both limbs from x, independent of each other: side by side, the same results.
+        for limb, (y, xor, left_out, count) in zip(
+                limbs, self._side_by_side(search, len(limbs)), strict=True):
+            self.evaluations += count
+            if xor < best_xor and left_out < share:
                 best, best_xor, found = y, xor, limb
         if not found:
             self._mend_failed_at = frame
