@@ -113,6 +113,20 @@ set); 0.61-1.20 frames/s (start and shape pass 16-28 s): 10 of 15 clips at 1 fra
 not the cartwheel (0.61), sit_stand (0.70), bend_pickup (0.78), climb_steps (0.81) and squat
 (0.97).
 
+Session 30, speed only (joints.csv byte-identical on all 15 60-frame clips to session 29's
+code, ``cmp``): a recovery's start search runs cheapest first, the hull's search (8 of its 9 s
+on the cartwheel) only when the last good pose's candidate is still a divergence (the
+cartwheel's frames 35 and 39 end there, 9 and 25 run both); a mend's two limb searches side by
+side. The machine's speed drifted over the session, so the ratio is from interleaved runs of
+``mocap track`` on the 60-frame cartwheel: session 29's code 1.36 and 1.36 s/frame, this
+code 1.04 and 1.17 (after the start: 0.95-1.03 -> 0.70-0.76 s/frame). Alone, early in the
+session: cartwheel 0.73 -> 1.02 frames/s, turn_pirouette 1.05. In a full 60-frame run later
+(nothing else running): mean 18.5 mm, none above 50, none unrecovered, no frame over 100 mm;
+1.29-1.61 frames/s, but the cartwheel **0.88** and the pirouette **0.93** (start and shape
+pass 17-24 s): 1 frame/s still not met in the suite. At ``--frames 30`` (this code before the
+mend change): mean 16.5 mm, the cartwheel's last frame diverged, unrecovered; 0.65-1.09
+frames/s (the start 17-22 s of 30 frames).
+
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
 with one other job, so frames/s are low bounds). MPJPE (offsets out), worst joint, frames/s,
