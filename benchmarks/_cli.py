@@ -1,11 +1,18 @@
 """What the benchmark scripts share: running `mocap` as a user would, in its own process, and
-the bare pycolmap calls it is measured against."""
+the bare pycolmap calls it is measured against, and where the real data sets are."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import time
+from pathlib import Path
+
+SHARED_DATA = Path(os.environ.get("MOCAP_SHARED_DATA")
+                   or Path(__file__).resolve().parents[2] / "shared" / "data")
+"""The real data sets: ``$MOCAP_SHARED_DATA`` when set (as the tests read it), else
+``../shared/data`` beside the repository."""
 
 # COLMAP's defaults through pycolmap, as a user would call them without `mocap` (one shared
 # camera, exhaustive matching, incremental mapping): `python -c BARE_COLMAP IMAGES OUT` writes

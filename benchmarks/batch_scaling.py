@@ -29,6 +29,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from _cli import SHARED_DATA  # benchmarks/ is on sys.path when a script here runs
 
 
 def main() -> None:
@@ -101,7 +102,7 @@ def _silhouettes_scaling(root: Path, frames: int) -> None:
     from tracking.rig.video import init_video, workspace_cameras
     from tracking.silhouettes.step import SilhouettesConfig, make_silhouettes
 
-    demo = Path(__file__).resolve().parents[2] / "shared" / "data" / "pose2sim_demo"
+    demo = SHARED_DATA / "pose2sim_demo"
     if not demo.is_dir():
         print(f"silhouettes: skipped ({demo} is absent)")
         return

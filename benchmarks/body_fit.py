@@ -29,9 +29,9 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 import numpy as np
+from _cli import SHARED_DATA  # benchmarks/ is on sys.path when a script here runs
 
 from tracking.body.model import (
     NODE_NAMES,
@@ -55,8 +55,7 @@ from tracking.fit.body_fit import (
     shape_from_scales,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
-BVH = ROOT.parent / "shared" / "data" / "mocap_bvh"
+BVH = SHARED_DATA / "mocap_bvh"
 
 
 def _errors_mm(joints: dict, truth: dict) -> np.ndarray:

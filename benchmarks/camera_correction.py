@@ -32,10 +32,9 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from _cli import mocap  # benchmarks/ is on sys.path when a script here runs
+from _cli import SHARED_DATA, mocap  # benchmarks/ is on sys.path when a script here runs
 
-ROOT = Path(__file__).resolve().parents[1]
-BVH = ROOT.parent / "shared" / "data" / "mocap_bvh" / "cmu_02_01_walk.bvh"
+BVH = SHARED_DATA / "mocap_bvh" / "cmu_02_01_walk.bvh"
 OFFSETS_PX = {"cam01": (10.0, -6.0), "cam02": (-7.0, 0.0)}
 """Principal-point errors of the calibration given to the capture, pixels (x, y)."""
 

@@ -21,9 +21,10 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _cli import SHARED_DATA  # benchmarks/ is on sys.path when a script here runs
 
 ROOT = Path(__file__).resolve().parents[1]
-FOUNTAIN = ROOT.parent / "shared" / "data" / "fountain_p11" / "images"
+FOUNTAIN = SHARED_DATA / "fountain_p11" / "images"
 SIZE = "1024"
 
 

@@ -21,16 +21,18 @@ import tempfile
 from pathlib import Path
 
 import pycolmap
+from _cli import SHARED_DATA  # benchmarks/ is on sys.path when a script here runs
 
 from recon.calibration.compare import CompareConfig, compare_intrinsics
 from recon.sfm.pipeline import SfMConfig
 from recon.workspace import Workspace
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 SETS = {
-    "temple": (DATA / "temple_sparse_ring", DATA / "temple_sparse_ring" / "templeSR_par.txt",
+    "temple": (SHARED_DATA / "temple_sparse_ring",
+               SHARED_DATA / "temple_sparse_ring" / "templeSR_par.txt",
                {"kruppa": 0.01, "kruppa+ba": 0.003}, None),
-    "fountain": (DATA / "fountain_p11" / "images", DATA / "fountain_p11" / "gt_dense_cameras",
+    "fountain": (SHARED_DATA / "fountain_p11" / "images",
+                 SHARED_DATA / "fountain_p11" / "gt_dense_cameras",
                  {"kruppa": 0.005, "kruppa+ba": 0.001, "kruppa-pp": 0.002,
                   "kruppa-pp-epipolar": 0.002}, 10.0),
 }

@@ -21,10 +21,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from _cli import BARE_COLMAP  # benchmarks/ is on sys.path when a script here runs
+from _cli import BARE_COLMAP, SHARED_DATA  # benchmarks/ is on sys.path when a script here runs
 
-ROOT = Path(__file__).resolve().parents[1]
-TEMPLE = ROOT.parent / "shared" / "data" / "temple_sparse_ring"
+TEMPLE = SHARED_DATA / "temple_sparse_ring"
 
 
 def _timed(command: list[str]) -> float:

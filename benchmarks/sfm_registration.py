@@ -30,14 +30,19 @@ import time
 from pathlib import Path
 
 import pycolmap
-from _cli import BARE_COLMAP, mocap  # benchmarks/ is on sys.path when a script here runs
+from _cli import (  # benchmarks/ is on sys.path when a script here runs
+    BARE_COLMAP,
+    SHARED_DATA,
+    mocap,
+)
 
 from recon.evaluation.truth import load_ground_truth
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 SETS = {
-    "temple": (DATA / "temple_sparse_ring", DATA / "temple_sparse_ring" / "templeSR_par.txt"),
-    "fountain": (DATA / "fountain_p11" / "images", DATA / "fountain_p11" / "images" / "K.txt"),
+    "temple": (SHARED_DATA / "temple_sparse_ring",
+               SHARED_DATA / "temple_sparse_ring" / "templeSR_par.txt"),
+    "fountain": (SHARED_DATA / "fountain_p11" / "images",
+                 SHARED_DATA / "fountain_p11" / "images" / "K.txt"),
 }
 
 

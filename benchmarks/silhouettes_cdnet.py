@@ -54,7 +54,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from _cli import mocap  # benchmarks/ is on sys.path when a script here runs
+from _cli import SHARED_DATA, mocap  # benchmarks/ is on sys.path when a script here runs
 
 from recon.cameras import Camera, write_cameras_json
 from recon.workspace import Workspace
@@ -62,7 +62,7 @@ from tracking.rig.video import read_frames
 from tracking.silhouettes.subtraction import Counts, Label, confusion_counts
 
 ROOT = Path(__file__).resolve().parents[1]
-HIGHWAY = ROOT.parent / "shared" / "data" / "cdnet_highway"
+HIGHWAY = SHARED_DATA / "cdnet_highway"
 TARGET_F = 0.95
 PICTURE_FRAMES = (520, 690, 860)
 CAMERA = "highway"

@@ -61,13 +61,12 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from _cli import mocap  # benchmarks/ is on sys.path when a script here runs
+from _cli import SHARED_DATA, mocap  # benchmarks/ is on sys.path when a script here runs
 from scipy.spatial.transform import Rotation
 
 from tracking.rig.synth_video import cloth_texture, composite, scene_background
 
-ROOT = Path(__file__).resolve().parents[1]
-BVH = ROOT.parent / "shared" / "data" / "mocap_bvh"
+BVH = SHARED_DATA / "mocap_bvh"
 STAND, WALK = BVH / "cmu_131_01_start_walk_stop.bvh", BVH / "cmu_02_01_walk.bvh"
 TARGET = 0.92
 WALK_YAW_DEG = 45.0

@@ -27,10 +27,9 @@ import time
 from pathlib import Path
 
 import cv2
-from _cli import mocap  # benchmarks/ is on sys.path when a script here runs
+from _cli import SHARED_DATA, mocap  # benchmarks/ is on sys.path when a script here runs
 
-ROOT = Path(__file__).resolve().parents[1]
-WALK = ROOT.parent / "shared" / "data" / "mocap_bvh" / "cmu_02_01_walk.bvh"
+WALK = SHARED_DATA / "mocap_bvh" / "cmu_02_01_walk.bvh"
 TARGET = 30.0
 
 

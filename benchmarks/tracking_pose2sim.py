@@ -42,10 +42,10 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from _cli import mocap  # benchmarks/ is on sys.path when a script here runs
+from _cli import SHARED_DATA, mocap  # benchmarks/ is on sys.path when a script here runs
 
 ROOT = Path(__file__).resolve().parents[1]
-DEMO = ROOT.parent / "shared" / "data" / "pose2sim_demo"
+DEMO = SHARED_DATA / "pose2sim_demo"
 OUT = ROOT / "benchmarks" / "out"
 TRACKERS: dict[str, tuple[str, tuple[str, ...]]] = {
     "superquadric": ("superquadric", ()),

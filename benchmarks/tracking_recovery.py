@@ -28,11 +28,10 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
-from _cli import mocap  # benchmarks/ is on sys.path when a script here runs
+from _cli import SHARED_DATA, mocap  # benchmarks/ is on sys.path when a script here runs
 from tracking_synthetic import _joints
 
-ROOT = Path(__file__).resolve().parents[1]
-CLIPS = ROOT.parent / "shared" / "data" / "mocap_bvh"
+CLIPS = SHARED_DATA / "mocap_bvh"
 
 
 def corrupt(ws: Path, first: int, last: int, source: int) -> None:

@@ -192,9 +192,10 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from _cli import SHARED_DATA  # benchmarks/ is on sys.path when a script here runs
 from tracking_synthetic import Case, synth_subject, track_case  # benchmarks/ is on sys.path
 
-CLIP_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "mocap_bvh"
+CLIP_DIR = SHARED_DATA / "mocap_bvh"
 CLIPS: dict[str, str] = {"walk": "cmu_02_01_walk.bvh"} | {
     name: f"cmu_{name}.bvh" for name in (
         "run", "jump", "cartwheel", "dance", "boxing", "bend_pickup", "wave", "squat",

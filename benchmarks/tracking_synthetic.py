@@ -42,11 +42,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from _cli import mocap  # benchmarks/ is on sys.path when a script here runs
+from _cli import SHARED_DATA, mocap  # benchmarks/ is on sys.path when a script here runs
 
-ROOT = Path(__file__).resolve().parents[1]
-WALK = ROOT.parent / "shared" / "data" / "mocap_bvh" / "cmu_02_01_walk.bvh"
-RUN = ROOT.parent / "shared" / "data" / "mocap_bvh" / "cmu_run.bvh"
+WALK = SHARED_DATA / "mocap_bvh" / "cmu_02_01_walk.bvh"
+RUN = SHARED_DATA / "mocap_bvh" / "cmu_run.bvh"
 
 
 def _joints(path: Path) -> dict[int, dict[str, np.ndarray]]:
