@@ -1,6 +1,6 @@
 """Silhouette tracking on real video: the Pose2Sim demo (issue 6), one run.
 
-    .venv/bin/python benchmarks/tracking_pose2sim.py [--keep DIR] [--last N] [--trackers ...]
+    .venv/bin/python benchmarks/tracking_pose2sim.py [--keep DIR] [--overwrite] [--last N] [--trackers ...]
 
 For each tracker (`TRACKERS`: the thesis' superquadrics, MakeHuman's skinned body of issue 19,
 and that body without the spine's side bend and twist), `mocap init-video` (Calib.qca.txt),
@@ -71,6 +71,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--keep", type=Path, help="keep the workspace in this folder")
     parser.add_argument("--last", type=int, help="track frames 0..LAST only")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="track again when the kept workspace's tracks are up to date (the "
+                        "step's fingerprint holds its inputs and options, not the code: after a "
+                        "change to the tracker, a kept track measures nothing new)")
     parser.add_argument("--trackers", nargs="+", default=list(TRACKERS), choices=TRACKERS,
                         help="trackers to run and score (default: all)")
     args = parser.parse_args()
@@ -85,6 +89,7 @@ def main() -> None:
         t_sil = mocap("silhouettes", str(ws), "--background-images",
                       str(DEMO / "calibration" / "extrinsics"), "--plates", "cluttered")
         extra = ["--last", str(args.last)] if args.last is not None else []
+        extra += ["--overwrite"] if args.overwrite else []
         medians: dict[str, float] = {}
         for tracker in args.trackers:
             body, hold = TRACKERS[tracker]
