@@ -1,6 +1,7 @@
 """Silhouette tracking on real video: the Pose2Sim demo (issue 6), one run.
 
-    .venv/bin/python benchmarks/tracking_pose2sim.py [--keep DIR] [--overwrite] [--last N] [--trackers ...]
+    .venv/bin/python benchmarks/tracking_pose2sim.py [--keep DIR] [--overwrite] [--last N]
+        [--trackers ...]
 
 For each tracker (`TRACKERS`: the thesis' superquadrics, MakeHuman's skinned body of issue 19,
 and that body without the spine's side bend and twist), `mocap init-video` (Calib.qca.txt),

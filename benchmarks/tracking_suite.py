@@ -125,12 +125,14 @@ session: cartwheel 0.73 -> 1.02 frames/s, turn_pirouette 1.05. In a full 60-fram
 1.29-1.61 frames/s, but the cartwheel **0.88** and the pirouette **0.93** (start and shape
 pass 17-24 s): 1 frame/s still not met in the suite. At ``--frames 30`` (this code before the
 mend change): mean 16.5 mm, the cartwheel's last frame diverged, unrecovered; 0.65-1.09
-frames/s (the start 17-22 s of 30 frames). Why frame 29 stays: the track slides from frame 25
-(XOR 0.24 -> 0.33, the left hip 97 -> 166 mm off) under the bars until 29; there the last good
-pose's candidate (frame 26's) reaches 0.313 and the hull's best 0.336, while the same tracker
-started from the true pose at frame 24 (`--init-pose`, its own shape) tracks 25-29 at 18-21
-mm and 0.20-0.22 XOR. Older seeds do worse (frames 20-25's tracked poses refined at frame 29:
-0.34-0.54): the search lacks a start near that pose, not a seed further back.
+frames/s (the start 17-22 s of 30 frames); again at 0a26ba7, later and slower: joints.csv
+byte-identical, 0.60-1.11 frames/s (the start 16-25 s). Why frame 29 stays: the track slides
+from frame 25 (XOR 0.24 -> 0.33, the left hip 97 -> 166 mm off) under the bars until 29; there
+the last good pose's candidate (frame 26's) reaches 0.313 and the hull's best 0.336, while the
+same tracker started from the true pose at frame 24 (`--init-pose`, its own shape) tracks
+25-29 at 18-21 mm and 0.20-0.22 XOR. Older seeds do worse (frames 20-25's tracked poses
+refined at frame 29: 0.34-0.54): the search lacks a start near that pose, not a seed further
+back.
 
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
