@@ -126,7 +126,10 @@ session: cartwheel 0.73 -> 1.02 frames/s, turn_pirouette 1.05. In a full 60-fram
 pass 17-24 s): 1 frame/s still not met in the suite. At ``--frames 30`` (this code before the
 mend change): mean 16.5 mm, the cartwheel's last frame diverged, unrecovered; 0.65-1.09
 frames/s (the start 17-22 s of 30 frames); again at 0a26ba7, later and slower: joints.csv
-byte-identical, 0.60-1.11 frames/s (the start 16-25 s). Why frame 29 stays: the track slides
+byte-identical, 0.60-1.11 frames/s (the start 16-25 s). With ``--repeats 3`` (the fastest
+of three runs, poses the same each time) at the session's end, 60 frames: cartwheel 0.86,
+turn_pirouette 0.96, walk 1.50 frames/s (the cartwheel's three runs 1.13, 1.29 and 1.17
+s/frame, the start 19-27 s). Why frame 29 stays: the track slides
 from frame 25 (XOR 0.24 -> 0.33, the left hip 97 -> 166 mm off) under the bars until 29; there
 the last good pose's candidate (frame 26's) reaches 0.313 and the hull's best 0.336, while the
 same tracker started from the true pose at frame 24 (`--init-pose`, its own shape) tracks
