@@ -1320,15 +1320,18 @@ class SilhouetteTracker:
                 # so, and track no merged blob. Else the start search again, from the last
                 # good pose and the hull.
                 self._one_subject(masks)
-                x, e, found = self._recover(
-                    masks, energy, x, e,
-                    enough=lambda e_y: e_y <= limit and not self.watch.verdict(e_y / area))
+
+                def settled(e_y: float) -> bool:
+                    """A pose of this energy is no divergence (under both bars)."""
+                    return e_y <= limit and not self.watch.verdict(e_y / area)
+
+                x, e, found = self._recover(masks, energy, x, e, enough=settled)
                 if e > limit:
                     return self._lost(frame, e, area, start, f"{why}; the start search found "
                                       f"nothing under it (XOR {e / area:.1%})")
                 # Recovered when the search found a pose that is no divergence (a recovered
                 # frame between the high and spike bars counts towards a slide).
-                if found is None or self.watch.verdict(e / area):
+                if found is None or not settled(e):
                     status = "diverged"
                     # A pose the search found can be better and still a divergence: say which.
                     searched = ("found nothing better" if found is None else
