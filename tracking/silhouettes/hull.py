@@ -28,6 +28,7 @@ Pure numpy and OpenCV; no I/O.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -79,10 +80,19 @@ def check_voxel_grid(size_m: float, voxel_m: float, size_flag: str, voxel_flag: 
 def voxel_centres(centre: np.ndarray, size_m: float, voxel_m: float) -> tuple[np.ndarray, int]:
     """((n**3, 3) centres, n) of the cube of side ``size_m`` around ``centre``, ``voxel_m``
     apart, in C order over (x, y, z)."""
+    grid, n = _centred_grid(size_m, voxel_m)
+    return grid + np.asarray(centre, dtype=float), n
+
+
+@functools.lru_cache(maxsize=4)
+def _centred_grid(size_m: float, voxel_m: float) -> tuple[np.ndarray, int]:
+    """`voxel_centres` around the origin, made once per cube: the tracker carves a
+    hull every frame, and making this grid took a quarter of the carving's time."""
     n = int(np.ceil(size_m / voxel_m))
     axis = (np.arange(n) - (n - 1) / 2) * voxel_m
     grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
-    return grid + np.asarray(centre, dtype=float), n
+    grid.flags.writeable = False
+    return grid, n
 
 
 _BLOCK = 4

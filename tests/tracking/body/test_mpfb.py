@@ -115,6 +115,26 @@ def _navel_girth_m(assets, rest) -> float:
     return float(ConvexHull(ring[:, [0, 2]]).area)
 
 
+def test_the_compiled_target_sum_is_numpys_float_for_float(assets):
+    """`shaped_kept_vertices` adds the macro targets in compiled code (`add_targets`): the
+    same floats as numpy's ``kept[rows] += w * offsets``, target after target, on shapes
+    across the macro ranges (a shape pass builds hundreds of bodies)."""
+    rng = np.random.default_rng(7)
+    for _ in range(8):
+        shape = MacroShape(**{k: float(rng.uniform()) for k in
+                              ("gender", "muscle", "weight", "height", "proportions")})
+        expected = np.concatenate([assets.vertices_m, assets.helper_vertices_m])
+        weights = np.zeros(len(assets.target_starts) - 1)
+        for key, w in macro_target_weights(shape).items():
+            if assets.target_index[key] >= 0:
+                weights[assets.target_index[key]] += w
+        assert np.count_nonzero(weights) >= 8  # several targets blend
+        for k in np.flatnonzero(weights):
+            a, b = assets.target_starts[k], assets.target_starts[k + 1]
+            expected[assets.target_rows[a:b]] += weights[k] * assets.target_offsets_m[a:b]
+        assert np.array_equal(shaped_kept_vertices(assets, shape), expected)
+
+
 def test_more_weight_widens_the_waist(assets):
     girths = [_navel_girth_m(assets, rest_body(assets, MacroShape(weight=w)))
               for w in (0.0, 0.25, 0.5, 0.75, 1.0)]  # fmt: skip

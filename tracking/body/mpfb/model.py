@@ -139,8 +139,9 @@ class MpfbAssets:
     skin_weights: np.ndarray  # (V, 4) float64, rows sum to 1
     skin_weight_matrix: np.ndarray  # (V, B) the same weights, dense, for blending by matmul
     target_index: dict[str, int]  # macro target key -> stored target (-1: empty target)
-    target_rows: tuple[np.ndarray, ...]  # per stored target, (n,) kept-vertex indices
-    target_offsets_m: tuple[np.ndarray, ...]  # per stored target, (n, 3) float32 offsets
+    target_starts: np.ndarray  # (T + 1,) stored target k's rows: target_starts[k]:[k + 1]
+    target_rows: np.ndarray  # (R,) int64 kept-vertex indices, distinct within a target
+    target_offsets_m: np.ndarray  # (R, 3) float32 offsets of those rows
     decimated_vertex_indices: np.ndarray  # (Vd,) into vertices_m
     decimated_faces: np.ndarray  # (Fd, 3) into decimated_vertex_indices
     provenance: dict
@@ -194,13 +195,12 @@ def _assets_from_arrays(d: dict[str, np.ndarray]) -> MpfbAssets:
     steps = d["target_row_steps"].astype(np.int64)
     offsets = d["target_offsets"].astype(np.float32) * np.float32(d["target_offset_unit_m"])
     spans = list(zip(starts[:-1], starts[1:], strict=True))
-    rows = tuple(_readonly(np.cumsum(steps[a:b])) for a, b in spans)
-    if any(len(r) and r[-1] >= n_kept for r in rows):
+    rows = np.concatenate([np.cumsum(steps[a:b]) for a, b in spans]).astype(np.int64)
+    if len(rows) and rows.max() >= n_kept:
         raise ValueError("target rows past the kept vertices")
-    target_offsets = tuple(_readonly(offsets[a:b]) for a, b in spans)
     target_index = {str(k): int(i) for k, i in zip(d["target_keys"], d["target_of_key"],
                                                   strict=True)}  # fmt: skip
-    if max(target_index.values()) >= len(rows):
+    if max(target_index.values()) >= len(spans):
         raise ValueError("target_of_key past the stored targets")
 
     top = int(np.argmax(d["vertices_m"][:, 1]))
@@ -226,8 +226,9 @@ def _assets_from_arrays(d: dict[str, np.ndarray]) -> MpfbAssets:
         skin_weights=_readonly(weights),
         skin_weight_matrix=_readonly(dense),
         target_index=target_index,
-        target_rows=rows,
-        target_offsets_m=target_offsets,
+        target_starts=_readonly(np.asarray(starts, dtype=np.int64)),
+        target_rows=_readonly(rows),
+        target_offsets_m=_readonly(np.ascontiguousarray(offsets)),
         decimated_vertex_indices=_readonly(d["decimated_vertex_indices"].astype(np.int64)),
         decimated_faces=_readonly(d["decimated_faces"].astype(np.int32)),
         provenance=json.loads(str(d["provenance_json"])),
@@ -358,14 +359,15 @@ class RestBody:
 def shaped_kept_vertices(assets: MpfbAssets, shape: MacroShape) -> np.ndarray:
     """(V + H, 3) body then helper vertices with the macro targets applied, in the source frame
     (not on the floor)."""
+    from tracking.body.mpfb.skinning import add_targets
+
     kept = np.concatenate([assets.vertices_m, assets.helper_vertices_m])
-    stored = np.zeros(len(assets.target_rows))
+    stored = np.zeros(len(assets.target_starts) - 1)
     for key, w in macro_target_weights(shape).items():
         k = assets.target_index[key]
         if k >= 0:
             stored[k] += w
-    for k in np.flatnonzero(stored):
-        kept[assets.target_rows[k]] += stored[k] * assets.target_offsets_m[k]
+    add_targets(kept, stored, assets.target_starts, assets.target_rows, assets.target_offsets_m)
     return kept
 
 

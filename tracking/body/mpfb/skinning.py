@@ -1,4 +1,6 @@
-"""The compiled linear-blend-skinning kernels of `tracking.body.mpfb.model.posed_vertices` and
+"""The compiled kernels of the MPFB body: the macro targets' sum of
+`tracking.body.mpfb.model.shaped_kept_vertices` (`add_targets`), and the linear blend skinning
+of `tracking.body.mpfb.model.posed_vertices` and
 `tracking.body.mpfb.subject.MpfbModel.posed_vertices`.
 
 Apart from the model so that the ``mpfb`` plugin's module, which ``mocap plugins`` imports to
@@ -9,6 +11,24 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+
+
+@numba.njit(cache=True, nogil=True)
+def add_targets(kept: np.ndarray, weights: np.ndarray, starts: np.ndarray, rows: np.ndarray,
+                offsets: np.ndarray) -> None:  # fmt: skip
+    """kept[rows[i]] += weights[k] * offsets[i] for the rows i of every stored target k with a
+    non-zero weight (rows ``starts[k]:starts[k + 1]``), target after target: numpy's
+    ``kept[rows_k] += weights[k] * offsets_k`` (float32 offsets widened to float64, the same
+    products and sums in the same order, so the same floats; rows are distinct within a
+    target) without its gathers and temporaries, a tenth of the time."""
+    for k in range(weights.shape[0]):
+        w = weights[k]
+        if w == 0.0:
+            continue
+        for i in range(starts[k], starts[k + 1]):
+            r = rows[i]
+            for c in range(3):
+                kept[r, c] += w * np.float64(offsets[i, c])
 
 
 @numba.njit(cache=True, nogil=True)

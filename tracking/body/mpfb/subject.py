@@ -88,13 +88,22 @@ def clothed(assets: MpfbAssets, rest: Any, thickness_m: float) -> Any:
         return rest
     from recon.mesh.normals import vertex_normals
 
+    normals = vertex_normals(rest.vertices_m, assets.faces)
+    vertices = rest.vertices_m + thickness_m * _clothing_fade(assets)[:, None] * normals
+    vertices.flags.writeable = False
+    return dataclasses.replace(rest, vertices_m=vertices)
+
+
+@cache
+def _clothing_fade(assets: MpfbAssets) -> np.ndarray:
+    """(V,) how much of `clothed`'s thickness each vertex gets: 1 where `CLOTHED_BONES` carry
+    it wholly, fading to 0 where their skinning weight falls to one half (the same for every
+    shape: made once per assets)."""
     columns = [assets.bone(name) for name in CLOTHED_BONES]
     covered = assets.skin_weight_matrix[:, columns].sum(axis=1)
     fade = np.clip(2.0 * covered - 1.0, 0.0, 1.0)
-    normals = vertex_normals(rest.vertices_m, assets.faces)
-    vertices = rest.vertices_m + thickness_m * fade[:, None] * normals
-    vertices.flags.writeable = False
-    return dataclasses.replace(rest, vertices_m=vertices)
+    fade.flags.writeable = False
+    return fade
 
 
 def _skeleton_of(joints: np.ndarray, floor_y: float) -> BodyShape:
