@@ -1,6 +1,6 @@
 # Two commands set everything up on a fresh machine:
 #   make demo   create .venv, install, run the pipeline on a generated synthetic scene
-#   make test   create .venv, install, run the test suite (what CI runs)
+#   make test   create .venv, install, lint, run the test suite (what CI runs)
 SHELL := /bin/bash
 PYTHON ?= python3
 VENV ?= .venv
@@ -23,7 +23,8 @@ APT_PACKAGES := libusb-1.0-0 libgl1 libegl1 libgomp1 libvulkan1 mesa-vulkan-driv
 demo: install
 	$(VENV)/bin/mocap demo
 
-test: install
+# Lint first: a commit that breaks `make lint` fails CI too (two did, session 30, unnoticed).
+test: install lint
 	@$(VENV)/bin/rerun analytics disable >/dev/null 2>&1 || true
 	$(PY) -m pytest -q $(PYTEST_WORKERS)
 

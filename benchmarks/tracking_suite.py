@@ -137,6 +137,24 @@ same tracker started from the true pose at frame 24 (`--init-pose`, its own shap
 refined at frame 29: 0.34-0.54): the search lacks a start near that pose, not a seed further
 back.
 
+Session 31, where a 60-frame clip's time goes and two cheaper settings tried (both
+rejected). ``mocap track`` of the pirouette, wall time per part: the start and shape pass
+21 s (frame 0's start search 12.5 s: the hull fit 3.2, 12 refined starts 4.4; the 23
+shape-pass frames about 5 s; the 6-frame shape refinement 3.5 s), its two full recoveries
+9.5 s each (the last good pose's candidate 1.2, the hull fit 3.2, the refined starts 4.4),
+the other frames about 0.3 s each; the cartwheel alike (start 18 s, two full recoveries,
+two from the last good pose). Ranking a recovery's 12 starts by their XOR before refinement
+would not prune them: at the pirouette's frame 41 the winner (an upright start, 0.206 after
+refinement) was 11th of 12 before it. ``--contour-level 1`` (the outline refinement at half
+size, the shape's kept at full size): mean 20.8 mm against 18.5, bend_pickup 60.2 mm and
+unrecovered, the cartwheel unrecovered at 27; rejected. ``--shape-frames 16`` (4 frames in
+the shape refinement, not 6): mean 22.3 mm, cartwheel 54.5 and bend_pickup 53.0 mm, the
+cartwheel's frame 17 lost, its start 16 s against 17-21; rejected. An MPFB subject rebuilt
+in 3.4 ms, not 7.5 (the macro targets summed in compiled code, the same floats) and the
+hull's voxel grid made once: joints.csv byte-identical, and no change in wall time that the
+machine's drift lets one see (interleaved runs, old and new in turn, three each: pirouette
+0.96-1.06 against 1.00-1.09 s/frame, cartwheel 0.98-1.24 against 1.06-1.11).
+
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
 with one other job, so frames/s are low bounds). MPJPE (offsets out), worst joint, frames/s,
