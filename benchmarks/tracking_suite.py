@@ -9,8 +9,10 @@ Each clip (`CLIPS`: walk, run, jump, cartwheel, ...; some in Daz naming, which t
 retargeting reads) is rendered by `mocap synth` with its defaults (4 ring cameras, 640x480,
 30 fps, noisy silhouettes, MakeHuman's skinned body with `tracking.rig.synth.SUBJECT_SHAPE` in
 2 cm of loose clothing: not the tracker's start), ``--frames`` frames from ``--start`` (by
-default synth's: clip frame 1 when frame 0 is a T-pose, as in cmu_run and the three
-Daz-named clips, else 0; `tracking.body.bvh.leading_reference_frames`). `mocap track`
+default synth's: clip frame 1 when frame 0 is a T-pose, as in cmu_run; 5 in climb_steps and
+sit_stand and 4 in kick, the Daz-named clips, whose rest pose in frame 0 is followed by frames
+that ease the arms down into the capture; else 0;
+`tracking.body.bvh.leading_reference_frames`). `mocap track`
 tracks it with its defaults (the automatic start, the shape pass): the path users run is the
 path scored. ``--trackers`` (default: all three, on the same silhouettes):
 

@@ -444,7 +444,9 @@ def joint_turns_deg(motion: Motion) -> np.ndarray:
 
 
 def leading_reference_frames(motion: Motion) -> int:
-    """1 when frame 0 is a reference pose rather than motion, else 0.
+    """The frames before the capture: 0 when frame 0 is already motion; else the reference pose
+    in frame 0 and the blend out of it, the frames after it that turn a joint faster than any
+    later step of the clip does (`blend_frames`).
 
     Many BVH conversions of the CMU database put the skeleton's T-pose in frame 0 and the
     capture from frame 1; played as motion, that frame is a teleport no body makes. Of the 12
@@ -462,11 +464,41 @@ def leading_reference_frames(motion: Motion) -> int:
     """
     if motion.num_frames < 3:
         return 0
-    jumps = (joint_turns_deg(motion) > REFERENCE_TURN_DEG).sum(axis=1)
-    if jumps[0] >= max(REFERENCE_MIN_JOINTS, 2 * jumps[1:].max() + 1):
-        return 1
-    rest = rotation_angles_deg(local_rotations(motion)[0, 1:]).max() <= REFERENCE_REST_DEG
-    return int(rest and jumps[0] > jumps[1:].max())
+    turns = joint_turns_deg(motion)
+    jumps = (turns > REFERENCE_TURN_DEG).sum(axis=1)
+    reference = jumps[0] >= max(REFERENCE_MIN_JOINTS, 2 * jumps[1:].max() + 1)
+    if not reference:
+        rest = rotation_angles_deg(local_rotations(motion)[0, 1:]).max() <= REFERENCE_REST_DEG
+        reference = rest and jumps[0] > jumps[1:].max()
+    if not reference:
+        return 0
+    most = max(int(BLEND_MAX_S * motion.fps), 0)
+    return 1 + blend_frames(turns.max(axis=1)[1:], most)
+
+
+BLEND_MAX_S = 0.1
+"""A blend out of a reference pose lasts at most this long (a bound, not a fit: the clips' blends
+last 4 frames at 120 Hz, 33 ms), so that a clip that slows down from its first step on is not
+taken for one."""
+
+
+def blend_frames(fastest_deg: np.ndarray, most: int) -> int:
+    """How many of the frames that follow a reference pose still blend out of it: the leading
+    steps of `fastest_deg` (each step's largest joint turn, degrees, from the frame after the
+    reference on) that turn faster than every step after them. The 3 Daz-named clips of
+    ``shared/data/mocap_bvh`` ease the arms down from the rest pose over their frames 1-5
+    (largest turns 24, 21, 15 and 6 degrees per 120 Hz step, then 0.6-0.8), where no later step
+    turns more than 3.5 (climb_steps), 3.8 (sit_stand) or 10.1 (kick, a kick): 4 blend frames, 3
+    for the kick, whose own kick is faster than the blend's last step. At most `most` frames.
+    Without this, a synthetic sequence's first frame had the arms 70 degrees up and its second
+    had them down, both wrists 400 mm apart in 1/30 s. In the 9 CMU-named clips with a T-pose
+    the first step of the capture turns no faster than later ones (at most 18.3 degrees, dance,
+    where later steps reach 38.6 and more): no blend."""
+    count = 0
+    while (count < min(most, len(fastest_deg) - 1)
+           and fastest_deg[count] > fastest_deg[count + 1:].max()):
+        count += 1
+    return count
 
 
 def local_translations(motion: Motion) -> np.ndarray:

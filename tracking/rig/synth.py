@@ -15,8 +15,8 @@ video workspace (`recon.workspace`)::
 
 World frame: the BVH's, metres, Y up (so the floor is horizontal). Frame k of the sequence is
 clip frame ``first + k * step``; the frame rate is the clip's divided by ``step``. Unless
-``first_frame`` is given, ``first`` skips a reference T-pose in frame 0
-(`tracking.body.bvh.leading_reference_frames`).
+``first_frame`` is given, ``first`` skips a reference T-pose in frame 0 and the frames that
+blend out of it (`tracking.body.bvh.leading_reference_frames`).
 
 Cameras: ``cameras`` pinholes evenly on a horizontal circle around the subject's mean pelvis
 position, ``camera_height_m`` above the floor, all looking at the subject's mean position at
@@ -107,9 +107,10 @@ class SynthConfig:
         default=None, metadata={"help": "keep the first N frames after subsampling "
                                 "(default: all)"})
     first_frame: int | None = field(
-        default=None, metadata={"help": "first clip frame (default: 1 when clip frame 0 is a "
-                                "reference pose, such as the T-pose many CMU conversions start "
-                                "with, else 0)", "metavar": "FRAME"})
+        default=None, metadata={"help": "first clip frame (default: the first frame of the "
+                                "capture: past a reference pose in frame 0, such as the T-pose "
+                                "many CMU conversions start with, and the frames that blend out "
+                                "of it; else 0)", "metavar": "FRAME"})
     step: int | None = field(
         default=None, metadata={"help": "keep every K-th clip frame (default: the step that "
                                 "comes closest to --fps)"})

@@ -18,6 +18,7 @@ from tracking.body.bvh import (
     ROTATION_CHANNELS,
     Joint,
     Motion,
+    blend_frames,
     euler_to_rotations,
     forward_kinematics,
     leading_reference_frames,
@@ -28,6 +29,7 @@ from tracking.body.bvh import (
     rotations_to_channels,
     write_bvh,
 )
+from tracking.body.retarget import bvh_metres_per_unit
 
 WALK = "cmu_02_01_walk.bvh"
 START_WALK_STOP = "cmu_131_01_start_walk_stop.bvh"
@@ -77,14 +79,30 @@ def random_rotations(rng: np.random.Generator, n: int) -> np.ndarray:
 @pytest.mark.parametrize(("name", "reference"), [
     (WALK, 0), (START_WALK_STOP, 0), ("cmu_wave.bvh", 0),  # moving from frame 0
     ("cmu_run.bvh", 1), ("cmu_squat.bvh", 1), ("cmu_boxing.bvh", 1),  # a T-pose in frame 0
-    ("cmu_kick.bvh", 1), ("cmu_sit_stand.bvh", 1), ("cmu_climb_steps.bvh", 1),  # Daz's rest pose
+    # Daz's rest pose, then 4 frames (3 for the kick) that ease the arms down into the capture
+    ("cmu_kick.bvh", 4), ("cmu_sit_stand.bvh", 5), ("cmu_climb_steps.bvh", 5),
 ])  # fmt: skip
 def test_a_leading_t_pose_is_a_reference_frame(name: str, reference: int) -> None:
     motion = read_bvh(cmu(name))
     assert leading_reference_frames(motion) == reference
-    # Without its first frame no clip starts with a reference pose.
-    rest = dataclasses.replace(motion, channels=motion.channels[1:])
+    # Without its leading frames no clip starts with a reference pose.
+    rest = dataclasses.replace(motion, channels=motion.channels[reference:])
     assert leading_reference_frames(rest) == 0
+    # What is skipped is no capture: after it no joint moves 20 cm about the root between a
+    # 30 fps sequence's first two frames (at most 7.6 cm, wave; from frame 1 the Daz clips'
+    # hands moved 65 cm).
+    positions = forward_kinematics(motion, bvh_metres_per_unit(motion))
+    about_root = positions[reference:reference + 5:4] - positions[reference:reference + 5:4, :1]
+    assert np.linalg.norm(about_root[1] - about_root[0], axis=1).max() < 0.2
+
+
+def test_a_blend_is_the_leading_steps_faster_than_any_later_one():
+    """`blend_frames` counts the leading steps faster than every later one, up to its bound; a
+    clip that moves faster later has none."""
+    assert blend_frames(np.array([24.0, 21.0, 15.0, 6.0, 0.6, 3.2, 1.9]), 12) == 4
+    assert blend_frames(np.array([24.0, 21.0, 15.0, 6.0, 0.6, 10.0]), 12) == 3
+    assert blend_frames(np.array([18.3, 1.5, 1.1, 38.6]), 12) == 0
+    assert blend_frames(np.array([9.0, 8.0, 7.0, 6.0, 5.0, 4.0]), 2) == 2  # the bound
 
 
 @pytest.mark.shared_data

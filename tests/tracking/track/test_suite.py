@@ -31,7 +31,7 @@ def test_suite_subset_tracks_three_clips(tmp_path: Path, monkeypatch: pytest.Mon
     monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
     from tracking_suite import run_clip, start_frames, unrecovered
 
-    starts = start_frames([], list(CLIPS))  # synth's: climb_steps from clip frame 1
+    starts = start_frames([], list(CLIPS))  # synth's: climb_steps from clip frame 5
     for clip in CLIPS:
         case = run_clip(tmp_path, clip, FRAMES, starts[clip], ["current"], "320x240",
                         clip_dir)["current"]  # fmt: skip

@@ -68,7 +68,9 @@ def test_the_bars_keep_a_margin_over_a_small_median_and_restart_at_a_new_level()
 def test_the_start_is_the_reference_until_enough_frames_follow_it():
     """A track that leaves its start at once must not set its own reference: climb_steps went
     from its start at 9.6% XOR to 17.9% in the next frame, both wrists 300 mm off, and the
-    first three frames' median was that wrong level (session 21)."""
+    first three frames' median was that wrong level (session 21; there the truth's arms dropped
+    70 degrees in one frame, the clip's blend out of its rest pose, which synth skips since
+    session 31)."""
     watch = XorWatch(WATCH)
     watch.restart(0.096)
     assert watch.reference() == pytest.approx(0.096)
