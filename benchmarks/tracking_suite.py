@@ -139,6 +139,17 @@ same tracker started from the true pose at frame 24 (`--init-pose`, its own shap
 refined at frame 29: 0.34-0.54): the search lacks a start near that pose, not a seed further
 back.
 
+Session 31, the Daz-named clips' blend frames skipped (`tracking.body.bvh.blend_frames`):
+their frames 1-4 ease the arms down from the rest pose (24, 21, 15 and 6 degrees per 120 Hz
+step; no later step turns more than 3.5-10.1), so synth's first two frames had the hands 65
+cm apart about the root, and the tracker "recovered" at frame 1 or 2 from a track that had
+followed the truth's teleport. Now from clip frame 5 (kick 4), 60 frames: climb_steps 14.9
+-> 10.4 mm, sit_stand 15.1 -> 10.3 (16 frames flagged -> 1), kick 5.0 -> 5.6, no recovery;
+30 frames: 8.0, 7.0 and 5.0 mm, the 15 clips' mean 16.5 -> 16.2; the other 12 clips' synth
+input is unchanged (their leading frames are), and so are their figures. The whole 60-frame
+suite, nothing else running: mean 17.9 mm, none above 50, none unrecovered, no frame over 100
+mm; 1.01-1.97 frames/s, but turn_pirouette 0.97 (cartwheel 1.01): 1 frame/s not met.
+
 Session 31, where a 60-frame clip's time goes and two cheaper settings tried (both
 rejected). ``mocap track`` of the pirouette, wall time per part: the start and shape pass
 21 s (frame 0's start search 12.5 s: the hull fit 3.2, 12 refined starts 4.4; the 23
