@@ -472,8 +472,7 @@ def leading_reference_frames(motion: Motion) -> int:
         reference = rest and jumps[0] > jumps[1:].max()
     if not reference:
         return 0
-    most = max(int(BLEND_MAX_S * motion.fps), 0)
-    return 1 + blend_frames(turns.max(axis=1)[1:], most)
+    return 1 + blend_frames(turns.max(axis=1)[1:], int(BLEND_MAX_S * motion.fps))
 
 
 BLEND_MAX_S = 0.1

@@ -195,6 +195,9 @@ def _assets_from_arrays(d: dict[str, np.ndarray]) -> MpfbAssets:
     steps = d["target_row_steps"].astype(np.int64)
     offsets = d["target_offsets"].astype(np.float32) * np.float32(d["target_offset_unit_m"])
     spans = list(zip(starts[:-1], starts[1:], strict=True))
+    if starts[0] != 0 or starts[-1] != len(offsets):
+        raise ValueError("target_starts do not span the target offsets")
+    # Row i of a target is offsets[i]: rows and offsets are indexed by the same starts.
     rows = np.concatenate([np.cumsum(steps[a:b]) for a, b in spans]).astype(np.int64)
     if len(rows) and rows.max() >= n_kept:
         raise ValueError("target rows past the kept vertices")
