@@ -168,6 +168,21 @@ hull's voxel grid made once: joints.csv byte-identical, and no change in wall ti
 machine's drift lets one see (interleaved runs, old and new in turn, three each: pirouette
 0.96-1.06 against 1.00-1.09 s/frame, cartwheel 0.98-1.24 against 1.06-1.11).
 
+Session 32, a recovery's two best starts get a second pass of the hierarchy, side by side
+(`--recovery-passes` 2, `SilhouetteTracker._pass_again`). The 30-frame cartwheel's frame 29,
+replayed (its workspace's cameras, silhouettes and shape): its best extremity start, refined
+once, ends at 0.336 of the silhouette and 86 mm (the last good pose's candidate 0.313, 68
+mm, kept: diverged, unrecovered); a second pass takes it to 0.242 and 62 mm, a third to
+0.220 and 60. The true pose refined the same way reaches 0.250 and 36 mm. 30 frames, all 15
+clips: mean 16.2 mm, the cartwheel 40.9 -> 40.6 and its frame 29 recovered, none
+unrecovered; frames/s 0.69-1.22, under 1 for the cartwheel (its last frame's recovery, 20
+s of start), bend_pickup 0.75 and walk 0.84 (the first clip: numba compiled the worktree's
+kernels). 60 frames: mean 17.9 -> 17.1 mm, the cartwheel 46.9 -> 35.1 (its recoveries at
+35 and 39 no longer needed), the pirouette 22.5 -> 22.2 (frame 41 recovered, where it had
+diverged), the other 13 clips' figures unchanged; none above 50 mm, none unrecovered, no
+frame over 100 mm; 1.03-1.87 frames/s, the pirouette 1.03 and the cartwheel 1.04. The
+Pose2Sim demo: 100/100 frames, median IoU 0.827 (unchanged).
+
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
 with one other job, so frames/s are low bounds). MPJPE (offsets out), worst joint, frames/s,

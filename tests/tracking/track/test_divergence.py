@@ -9,6 +9,7 @@ import json
 import numpy as np
 import pytest
 
+from recon.errors import UserError
 from tracking.body.model import Pose
 from tracking.body.motion import read_pose_file
 from tracking.track.step import _write_outputs, status_lists
@@ -199,6 +200,34 @@ def test_a_recovery_searches_the_hull_only_when_the_last_good_pose_is_not_enough
             assert found == "the visual hull" and _mpjpe_mm(Pose(x), SHAPE, shown) < 1
         else:  # better than the tracked pose, so it is the candidate
             assert found == "the last good pose (frame 5)" and e < before, (found, e, before)
+
+
+@pytest.mark.parametrize("passes", [1, 2, 3])
+def test_a_recovery_gives_its_two_best_starts_more_passes(passes):
+    """`_pass_again`: of a recovery's refined starts, the two of lowest score (here x[0]; a
+    stand-in refinement moves it) get ``recovery_passes - 1`` more passes of the hierarchy,
+    each result kept only where it scores lower; the other starts are left as they are."""
+    from tests.tracking.track.test_tracker import CAMERAS, SHAPE
+
+    config = TrackConfig(body="superquadric", recovery_passes=passes)
+    tracker = SilhouetteTracker(CAMERAS, config, shape=SHAPE)
+    refined_again = []
+
+    def refine_starts(energy, starts):
+        refined_again.append([float(p.params[0]) for p in starts])
+        # The best start gets lower each pass, the second best higher (not kept).
+        return [p.params + np.r_[-0.5 if p.params[0] < 2 else 1.0, np.zeros(25)]
+                for p in starts]
+
+    tracker._refine_starts = refine_starts
+    tracker._objective = lambda energy, x, level: float(x[0])
+    starts = [np.r_[v, np.zeros(25)] for v in (3.0, 1.0, 5.0, 2.0)]
+    refined, scores = tracker._pass_again(None, starts, [3.0, 1.0, 5.0, 2.0])
+    assert refined_again == [[1.0 - 0.5 * k, 2.0] for k in range(passes - 1)]
+    assert scores == [3.0, 1.0 - 0.5 * (passes - 1), 5.0, 2.0]
+    assert [x[0] for x in refined] == scores
+    with pytest.raises(UserError, match="--recovery-passes must be >= 1"):
+        TrackConfig(recovery_passes=0)
 
 
 @pytest.mark.slow  # two start searches: about a minute on 2 shared cores
