@@ -181,7 +181,25 @@ kernels). 60 frames: mean 17.9 -> 17.1 mm, the cartwheel 46.9 -> 35.1 (its recov
 35 and 39 no longer needed), the pirouette 22.5 -> 22.2 (frame 41 recovered, where it had
 diverged), the other 13 clips' figures unchanged; none above 50 mm, none unrecovered, no
 frame over 100 mm; 1.03-1.87 frames/s, the pirouette 1.03 and the cartwheel 1.04. The
-Pose2Sim demo: 100/100 frames, median IoU 0.827 (unchanged).
+Pose2Sim demo: 100/100 frames, median IoU 0.827 (unchanged). The committed code run again an
+hour later, the machine slower (walk 1.68 -> 1.58 frames/s): the same poses and figures, but
+the cartwheel 0.91 and the pirouette 0.98 frames/s; at 30 frames 0.61-1.12, 10 of 15 clips
+under 1 (their start alone 16-23 s of a 30-frame clip); the fastest of 3 runs (``--clips
+turn_pirouette cartwheel --repeats 3``, poses identical) 0.98 and 1.03: 1 frame/s is not met.
+
+Session 32, three ways to a faster recovery or frame measured and dropped (not landed):
+- The views' count split over two threads (the compiled count releases the GIL): 0.95 ->
+  0.46 ms a count alone, but in ``mocap track`` 0.454 -> 0.414 ms (a thread's wake-up on every
+  count), the pirouette 62.7 -> 66.6 s and 36 -> 43 s of CPU; interleaved runs 59.8/63.8 old
+  against 59.6/63.8 new (pirouette), 63.5/61.9 against 60.5/57.3 (cartwheel).
+- The 12 starts refined cheaply (``init_grid`` 4, 40 simplex evaluations: 2.2 s against 4.2)
+  and the best two fully: on the 7 recoveries of both sets the full winner was first or second
+  of the cheap ranking, but the 30-frame cartwheel's frame 29 ended at 0.317 against 0.242
+  (diverged again); bend_pickup's frames 22 and 24 better (0.202 and 0.224 against 0.225 and
+  0.231). About 2 s a recovery for that risk: dropped.
+- A second pass for the last good pose's candidate, so that it is enough more often (the
+  hull's search then skipped): enough in 1 of the 5 recoveries of the pirouette, cartwheel (60
+  frames) and bend_pickup (30), by 0.199 against a bar near 0.200, for 0.6 s on every one.
 
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
