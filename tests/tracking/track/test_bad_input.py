@@ -5,6 +5,7 @@ synth` workspace (2 views at 200x150)."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import shutil
@@ -325,11 +326,13 @@ def _handstand(frames: int) -> list:
 def test_after_lost_frames_the_start_search_starts_from_the_last_good_pose_too():
     """A subject upside down is absent for frames 3-4: at frame 5 the start search runs from
     the last good pose as well as from the visual hull, whose upright starts and fit (within
-    60 degrees of up) cannot reach a handstand. Found again, on its pose."""
+    60 degrees of up) cannot reach a handstand: the hull's extremity starts are off here,
+    since with them, and the second pass of a recovery's best starts, the hull's search
+    finds the handstand too (1.5 mm, session 32). Found again, on its pose."""
     truth = _handstand(6)
     masks = [[np.zeros_like(m) for m in _masks(p)] if k in (3, 4) else _masks(p)
              for k, p in enumerate(truth)]  # fmt: skip
-    results, errors = _track(masks, truth)
+    results, errors = _track(masks, truth, dataclasses.replace(FAST, init_extremity_starts=0))
     statuses = [r.status for r in results]
     assert statuses == ["init", "tracked", "tracked", "absent", "absent", "recovered"], (
         statuses, [r.event for r in results])
