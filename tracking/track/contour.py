@@ -97,34 +97,6 @@ class _ViewTarget:
             points = points[known[pixel[:, 1], pixel[:, 0]]]
         self.outline = points  # (N, 2) pixel coordinates (centres at +0.5)
 
-    def sample(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Bilinear SDF (N,) and gradient (N, 2) at pixel coordinates uv (N, 2)."""
-        h, w = self.sdf.shape
-        x = np.clip(uv[:, 0] - 0.5, 0, w - 1.001)
-        y = np.clip(uv[:, 1] - 0.5, 0, h - 1.001)
-        x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
-        fx, fy = x - x0, y - y0
-
-        def bilinear(image: np.ndarray) -> np.ndarray:
-            return ((1 - fy) * ((1 - fx) * image[y0, x0] + fx * image[y0, x0 + 1])
-                    + fy * ((1 - fx) * image[y0 + 1, x0] + fx * image[y0 + 1, x0 + 1]))
-
-        return bilinear(self.sdf), np.stack([bilinear(self.grad_u), bilinear(self.grad_v)], 1)
-
-
-def _projection_derivative(camera: Camera, points: np.ndarray) -> np.ndarray:
-    """(N, 2, 3) derivative of the pixel position with respect to the world point (the
-    pinhole part of the projection: distortion changes it by far less than the step)."""
-    in_cam = points @ camera.R.T + camera.t
-    z = in_cam[:, 2]
-    fx, fy = camera.K[0, 0], camera.K[1, 1]
-    d = np.zeros((len(points), 2, 3))
-    d[:, 0, 0] = fx / z
-    d[:, 0, 2] = -fx * in_cam[:, 0] / z**2
-    d[:, 1, 1] = fy / z
-    d[:, 1, 2] = -fy * in_cam[:, 1] / z**2
-    return d @ camera.R
-
 
 class _Posed:
     """A model in a pose: world vertices and normals, and the derivatives of the vertices with
@@ -179,52 +151,38 @@ def _outline_system(posed: _Posed, cameras: Sequence[Camera], targets: Sequence[
                     model_masks: Sequence[np.ndarray], config: ContourConfig,
                     ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """Gauss-Newton normal equations (A, b) of one frame's outline residuals (module
-    docstring) over the columns of `posed`."""
+    docstring) over the columns of `posed`; each view's rows compiled
+    (`tracking.track.outline_kernel`)."""
+    from tracking.track.outline_kernel import contour_vertices, outline_rows
+
     n = posed.columns
     a, b = np.zeros((n, n)), np.zeros(n)
     scale = config.robust_px
+    extra = posed.extra if posed.extra is not None else np.zeros((len(posed.verts), 3, 0))
+    no_mask = np.zeros((0, 0), bool)
     for cam, target, model_mask in zip(cameras, targets, model_masks, strict=True):
-        ray = posed.verts - cam.center_in_world
-        ray /= np.linalg.norm(ray, axis=1, keepdims=True)
-        grazing = np.abs(np.sum(ray * posed.normals, axis=1)) < config.grazing
         uv, depth = cam.project(posed.verts)
-        h, w = model_mask.shape
-        with np.errstate(invalid="ignore"):
-            col, row = np.floor(uv[:, 0]), np.floor(uv[:, 1])
-            ok = grazing & (depth > 0) & (col >= 1) & (col < w - 1) & (row >= 1) & (row < h - 1)
         # Contour vertices: on the outline of the model's own silhouette, i.e. with some
         # background pixel next to them (the rest are hidden behind other parts).
-        idx = np.flatnonzero(ok)
-        c, r = col[idx].astype(int), row[idx].astype(int)
-        near_bg = np.zeros(len(idx), bool)
-        for dr in (-1, 0, 1):
-            for dc in (-1, 0, 1):
-                near_bg |= ~model_mask[r + dr, c + dc]
-        idx = idx[near_bg]
-        if target.known is not None:
-            idx = idx[target.known[row[idx].astype(int), col[idx].astype(int)]]
+        idx = contour_vertices(posed.verts, posed.normals, cam.center_in_world, uv, depth,
+                               model_mask, no_mask if target.known is None else target.known,
+                               config.grazing)  # fmt: skip
         if len(idx) == 0:
             continue
-        duv = np.matmul(_projection_derivative(cam, posed.verts[idx]),
-                        posed.derivatives(idx))  # (n, 2, columns)  # fmt: skip
+        jac, sdf, jac2, res, dist = outline_rows(
+            idx, posed.verts, uv, cam.R, cam.t, cam.K[0, 0], cam.K[1, 1], extra,
+            posed.node_weights, posed.moved_nodes, posed.skew, posed.constant, target.sdf,
+            target.grad_u, target.grad_v, target.outline)
         # Model -> image: signed distance of each contour point to the image outline.
-        sdf, grad = target.sample(uv[idx])
-        jac = grad[:, 0, None] * duv[:, 0] + grad[:, 1, None] * duv[:, 1]
         weight = 1.0 / (1.0 + (sdf / scale) ** 2)
         a += (jac * weight[:, None]).T @ jac
         b += (jac * weight[:, None]).T @ sdf
-        # Image -> model: each outline point to its nearest projected contour point.
+        # Image -> model: each outline point to its nearest projected contour point; both
+        # pixel coordinates of each outline point are rows of one system.
         if len(target.outline):
-            from scipy.spatial import cKDTree  # here: 0.4 s that `mocap track --help` skips
-
-            dist, nearest = cKDTree(uv[idx]).query(target.outline)
-            res = uv[idx][nearest] - target.outline
-            weight = 1.0 / (1.0 + (dist / scale) ** 2)
-            # Both pixel coordinates of each outline point are rows of one system.
-            jac2 = duv[nearest].reshape(-1, n)
-            weighted = jac2 * np.repeat(weight, 2)[:, None]
+            weighted = jac2 * np.repeat(1.0 / (1.0 + (dist / scale) ** 2), 2)[:, None]
             a += weighted.T @ jac2
-            b += weighted.T @ res.ravel()
+            b += weighted.T @ res
     return a, b
 
 

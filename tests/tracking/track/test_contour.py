@@ -146,3 +146,88 @@ def test_a_start_with_the_legs_swapped_is_put_right():
     assert _mpjpe_mm(Pose(swapped), shape, STRIDE, shape) > 60
     best = tracker._best_hypothesis(tracker._energy(masks), swapped)
     assert _mpjpe_mm(best, shape, STRIDE, shape) < 10
+
+
+def _outline_system_in_numpy(posed, cameras, targets, model_masks, config):
+    """The outline system as numpy computed it before it was compiled (session 33): the
+    oracle of `test_the_compiled_outline_system_is_numpys`."""
+    from scipy.spatial import cKDTree
+
+    n = posed.columns
+    a, b = np.zeros((n, n)), np.zeros(n)
+    scale = config.robust_px
+    for cam, target, model_mask in zip(cameras, targets, model_masks, strict=True):
+        ray = posed.verts - cam.center_in_world
+        ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+        grazing = np.abs(np.sum(ray * posed.normals, axis=1)) < config.grazing
+        uv, depth = cam.project(posed.verts)
+        h, w = model_mask.shape
+        with np.errstate(invalid="ignore"):
+            col, row = np.floor(uv[:, 0]), np.floor(uv[:, 1])
+            ok = grazing & (depth > 0) & (col >= 1) & (col < w - 1) & (row >= 1) & (row < h - 1)
+        idx = np.flatnonzero(ok)
+        c, r = col[idx].astype(int), row[idx].astype(int)
+        near_bg = np.zeros(len(idx), bool)
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                near_bg |= ~model_mask[r + dr, c + dc]
+        idx = idx[near_bg]
+        if target.known is not None:
+            idx = idx[target.known[row[idx].astype(int), col[idx].astype(int)]]
+        if len(idx) == 0:
+            continue
+        in_cam = posed.verts[idx] @ cam.R.T + cam.t
+        z, fx, fy = in_cam[:, 2], cam.K[0, 0], cam.K[1, 1]
+        d = np.zeros((len(idx), 2, 3))
+        d[:, 0, 0], d[:, 0, 2] = fx / z, -fx * in_cam[:, 0] / z**2
+        d[:, 1, 1], d[:, 1, 2] = fy / z, -fy * in_cam[:, 1] / z**2
+        duv = np.matmul(d @ cam.R, posed.derivatives(idx))
+        hh, ww = target.sdf.shape
+        x = np.clip(uv[idx, 0] - 0.5, 0, ww - 1.001)
+        y = np.clip(uv[idx, 1] - 0.5, 0, hh - 1.001)
+        x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+        ax, ay = x - x0, y - y0
+        sdf, grad_u, grad_v = (
+            (1 - ay) * ((1 - ax) * image[y0, x0] + ax * image[y0, x0 + 1])
+            + ay * ((1 - ax) * image[y0 + 1, x0] + ax * image[y0 + 1, x0 + 1])
+            for image in (target.sdf, target.grad_u, target.grad_v))
+        jac = grad_u[:, None] * duv[:, 0] + grad_v[:, None] * duv[:, 1]
+        weight = 1.0 / (1.0 + (sdf / scale) ** 2)
+        a += (jac * weight[:, None]).T @ jac
+        b += (jac * weight[:, None]).T @ sdf
+        dist, nearest = cKDTree(uv[idx]).query(target.outline)
+        res = uv[idx][nearest] - target.outline
+        jac2 = duv[nearest].reshape(-1, n)
+        weighted = jac2 * np.repeat(1.0 / (1.0 + (dist / scale) ** 2), 2)[:, None]
+        a += weighted.T @ jac2
+        b += weighted.T @ res.ravel()
+    return a, b
+
+
+@pytest.mark.parametrize("extra_columns", [0, 3])
+def test_the_compiled_outline_system_is_numpys(extra_columns):
+    """`contour._outline_system` (compiled rows, `tracking.track.outline_kernel`) against
+    the numpy it replaced: a pose off the silhouettes' (so that every residual is non-zero),
+    the shape's extra columns or none, a view with pixels of unknown label."""
+    from tracking.track.contour import _FrameOutlines, _outline_system, _Posed
+    from tracking.track.render import render_views
+
+    model = BodyModel(BodyShape.default(1.75))
+    masks = _masks(model, STRIDE)
+    known = [None, np.ones((240, 320), bool), None, None]
+    known[1][:, :150] = False  # the left half of view 1 unknown
+    config = ContourConfig()
+    frame = _FrameOutlines(CAMERAS, masks, config, known)
+    x = STRIDE.params.copy()
+    x[:3] += [0.03, -0.02, 0.04]
+    x[PARAM_INDEX["l_elbow_flex"]] += 0.3
+    rng = np.random.default_rng(5)
+    extra = rng.normal(size=(len(model.posed_vertices(Pose(x))), 3, extra_columns)) \
+        if extra_columns else None
+    posed = _Posed(model, x, np.arange(len(x)), extra)
+    rendered = render_views(RENDER, posed.verts, model.faces, CAMERAS)
+    a, b = _outline_system(posed, CAMERAS, frame.targets, rendered, config)
+    a_ref, b_ref = _outline_system_in_numpy(posed, CAMERAS, frame.targets, rendered, config)
+    assert a.shape == (len(x) + extra_columns,) * 2 and np.abs(b).max() > 1
+    np.testing.assert_allclose(a, a_ref, rtol=1e-9, atol=1e-9 * np.abs(a_ref).max())
+    np.testing.assert_allclose(b, b_ref, rtol=1e-9, atol=1e-9 * np.abs(b_ref).max())
