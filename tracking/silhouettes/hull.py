@@ -139,9 +139,6 @@ def hull_candidates(cameras: Sequence[Camera], masks: Sequence[np.ndarray], cent
         if dilate_px > 1:
             disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (dilate_px, dilate_px))
             mask = cv2.dilate(mask.astype(np.uint8), disc).astype(bool)
-        # Distance of every pixel to the nearest silhouette pixel (0 on the silhouette).
-        distance = cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2,
-                                         cv2.DIST_MASK_PRECISE)
         uv, depth = cam.project(blocks)
         in_cam = blocks @ cam.R.T + cam.t
         near = depth - reach_m
@@ -161,7 +158,7 @@ def hull_candidates(cameras: Sequence[Camera], masks: Sequence[np.ndarray], cent
                       | (uv[:, 1] - radius >= y1))))  # fmt: skip
         col = np.where(whole, uv[:, 0], 0).astype(np.int64)
         row = np.where(whole, uv[:, 1], 0).astype(np.int64)
-        rejected += whole & (distance[row, col] > radius)
+        rejected += whole & (_silhouette_distance(mask, row, col, radius, whole) > radius)
         may_see += partly
     enough = may_see - rejected >= max(2, views if min_views is None else min_views)
     keep = (rejected <= misses) & enough
@@ -173,6 +170,28 @@ def hull_candidates(cameras: Sequence[Camera], masks: Sequence[np.ndarray], cent
     index = np.sort((fine[:, 0] * n + fine[:, 1]) * n + fine[:, 2])
     i, j, k = np.unravel_index(index, (n, n, n))
     return np.stack([axis[i], axis[j], axis[k]], -1) + centre, index
+
+
+def _silhouette_distance(mask: np.ndarray, row: np.ndarray, col: np.ndarray,
+                         radius: np.ndarray, tested: np.ndarray) -> np.ndarray:  # fmt: skip
+    """(N,) the distance from pixel (row, col) to the nearest pixel of ``mask`` (0 on it), where
+    it matters: for the ``tested`` pixels, as far as their ``radius``; inf where it is farther.
+    The exact distance transform of the silhouette's bounding box widened by the largest
+    tested radius only (a body fills a tenth of a frame, so about a fifth of the full
+    transform's 3 ms at 640x480): every silhouette pixel is in that box, so the distances in
+    it are the full image's, and a pixel out of it is farther than any radius tested."""
+    out = np.full(len(row), np.inf)
+    if not tested.any():
+        return out
+    reach = int(np.ceil(np.max(radius[tested]))) + 1
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    y0, y1 = max(rows[0] - reach, 0), min(rows[-1] + reach + 1, mask.shape[0])
+    x0, x1 = max(cols[0] - reach, 0), min(cols[-1] + reach + 1, mask.shape[1])
+    distance = cv2.distanceTransform((~mask[y0:y1, x0:x1]).astype(np.uint8), cv2.DIST_L2,
+                                     cv2.DIST_MASK_PRECISE)  # fmt: skip
+    inside = tested & (row >= y0) & (row < y1) & (col >= x0) & (col < x1)
+    out[inside] = distance[row[inside] - y0, col[inside] - x0]
+    return out
 
 
 @dataclass(frozen=True)

@@ -31,6 +31,7 @@ distortion is honoured through :class:`~tracking.rig.cameras.Camera`.
 from __future__ import annotations
 
 import contextlib
+import functools
 import itertools
 import os
 import subprocess
@@ -155,22 +156,35 @@ _TOKENS = itertools.count(1)
 """`covered_gains`' count tokens: one per call, never reused (the stamps need no clearing)."""
 
 
+@functools.lru_cache(maxsize=8)
+def _stamps(shape: tuple[int, int, int]) -> np.ndarray:
+    """The (views, H, W) int64 stamps of every `ViewGains` of this shape: the tokens are never
+    reused, so what another count left in them is never its own, and one image serves all.
+    Made anew for each, its 10 MB at 640x480 were zeroed, and their pages faulted in, once
+    for every stage of the hierarchy (session 33)."""
+    return np.zeros(shape, np.int64)
+
+
 class ViewGains:
     """Per view, a per-pixel gain to sum over the pixels a mesh covers (`covered_gains`), with
     what the compiled count needs made once: the gains in one (views, H, W) int8 array, zero
     past a smaller view's size; per view an (H, W) int64 scratch image (``stamps``: each pixel
     counted once); the cameras' parameters stacked."""
 
-    def __init__(self, cameras: Sequence[Camera], gains: Sequence[np.ndarray]) -> None:
+    def __init__(self, cameras: Sequence[Camera], gains: Sequence[np.ndarray] | None = None
+                 ) -> None:  # fmt: skip
+        """gains: per camera, its (H, W) gains; None: zero, to be set in `gains` (views of
+        `stacked`)."""
         self.cameras = list(cameras)
-        if [np.shape(g) for g in gains] != [(c.height, c.width) for c in self.cameras]:
+        if gains is not None and [np.shape(g) for g in gains] != [(c.height, c.width)
+                                                                  for c in self.cameras]:
             raise ValueError("need one (height, width) gain image per camera")
         shape = (len(self.cameras), max((c.height for c in self.cameras), default=0),
                  max((c.width for c in self.cameras), default=0))
         self.stacked = np.zeros(shape, np.int8)
-        for view, gain in zip(self.stacked, gains, strict=True):
+        for view, gain in zip(self.stacked, gains or [], strict=False):
             view[:gain.shape[0], :gain.shape[1]] = gain
-        self.stamps = np.zeros(shape, np.int64)
+        self.stamps = _stamps(shape)
         self.cams_from_world = np.array([c.cam_from_world for c in self.cameras]).reshape(-1, 3, 4)
         self.Ks = np.array([c.K for c in self.cameras]).reshape(-1, 3, 3)
         self.dists = np.array([c.dist for c in self.cameras]).reshape(-1, 5)
