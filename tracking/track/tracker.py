@@ -386,9 +386,11 @@ class TrackConfig:
         default=120, metadata={"help": "evaluations of each simplex at initialisation"}
     )
     recovery_passes: int = field(
-        default=2,
+        default=3,
         metadata={"help": "passes of the whole hierarchy given to the two best starts of a "
-                  "recovery's search from the visual hull (every start has one; 1 = no more)"},
+                  "recovery's search from the visual hull (every start has one; 1 = no more); "
+                  "those after the second only while the best is still a divergence, and for "
+                  "the starts the pass before improved"},
     )  # fmt: skip
     voxel_m: float = field(default=0.03, metadata={"help": "visual-hull voxel size, metres"})
     hull_size_m: float = field(
@@ -674,13 +676,15 @@ class SilhouetteTracker:
                 f"parts of human size ({heights} m tall; the two largest {apart:.2f} m apart), "
                 "so the frame is not tracked")
 
-    def initialise(self, masks: Sequence[np.ndarray], init: Pose | None = None) -> tuple[Pose, str]:
+    def initialise(self, masks: Sequence[np.ndarray], init: Pose | None = None,
+                   enough: Callable[[float], bool] | None = None) -> tuple[Pose, str]:
         """The first pose: `init` if given, else the best of a body fitted to the visual hull and
         upright bodies at `init_headings` headings, each refined against the silhouettes. Sets
-        the shape when it was unknown."""
+        the shape when it was unknown. enough: for a recovery, whether a pose of this energy
+        is no divergence (`_pass_again`)."""
         if init is None:
             with self._searching_start():
-                return self._initialise_from_hull(masks)
+                return self._initialise_from_hull(masks, enough)
         if self.shape is None:
             raise ValueError("an initial pose needs the subject's shape")
         message, self._start_event = self._start_event or "init from the given pose", ""
@@ -688,7 +692,9 @@ class SilhouetteTracker:
         self.history = []
         return Pose(x), message
 
-    def _initialise_from_hull(self, masks: Sequence[np.ndarray]) -> tuple[Pose, str]:
+    def _initialise_from_hull(self, masks: Sequence[np.ndarray],
+                              enough: Callable[[float], bool] | None = None,
+                              ) -> tuple[Pose, str]:  # fmt: skip
         """`initialise` without a given pose."""
         from tracking.fit.body_fit import FitConfig, fit_body
 
@@ -728,7 +734,7 @@ class SilhouetteTracker:
         refined = self._refine_starts(energy, [*starts, *ends])
         scores = [self._objective(energy, x, self.config.final_level) for x in refined]
         if not estimate_shape:
-            refined, scores = self._pass_again(energy, refined, scores)
+            refined, scores = self._pass_again(energy, refined, scores, enough)
         # When the start also sets the shape, an extremity start wins by a clear lead only;
         # with the shape known (a recovery), the lowest XOR wins.
         best = start_winner(scores[:len(starts)], scores[len(starts):],
@@ -772,7 +778,8 @@ class SilhouetteTracker:
         return [x for x, _ in results]
 
     def _pass_again(self, energy: SilhouetteEnergy, refined: Sequence[np.ndarray],
-                    scores: Sequence[float]) -> tuple[list[np.ndarray], list[float]]:
+                    scores: Sequence[float], enough: Callable[[float], bool] | None = None,
+                    ) -> tuple[list[np.ndarray], list[float]]:  # fmt: skip
         """A recovery's refined starts and their scores (`_objective` at `final_level`), the
         `_AGAIN_STARTS` lowest given `recovery_passes` - 1 more passes of the whole hierarchy
         (side by side), each kept where it scores lower. From a far start one pass stops short
@@ -780,15 +787,29 @@ class SilhouetteTracker:
         extremity start went 0.336 -> 0.242 of the silhouette in a second pass (MPJPE 86 -> 62
         mm; a third: 0.220, 60 mm), past the last good pose's 0.313, and the frame recovered
         (it had diverged, unrecovered). The first frame's start is refined again with the
-        shape that follows it (`_initialise_from_hull`)."""
+        shape that follows it (`_initialise_from_hull`).
+
+        The passes after the second run only while the best start is not `enough` (its XOR,
+        `_recover`'s test: a pose that is no divergence; None: never enough), and only for
+        the starts the pass before lowered (a start it did not is where the same pass leaves
+        it again): the same frame 29, after a session-33 change of the outline refinement by
+        3e-16, ended its second pass at 0.302, still a divergence, and its third at 0.228."""
         refined, scores = list(refined), list(scores)
-        top = [int(i) for i in np.argsort(scores, kind="stable")[:_AGAIN_STARTS]]
-        for _ in range(self.config.recovery_passes - 1):
-            again = self._refine_starts(energy, [Pose(refined[i]) for i in top])
-            for i, y in zip(top, again, strict=True):
+        again_for = [int(i) for i in np.argsort(scores, kind="stable")[:_AGAIN_STARTS]]
+        for extra in range(self.config.recovery_passes - 1):
+            if extra and enough is not None \
+                    and enough(energy(Pose(refined[int(np.argmin(scores))]))):
+                break
+            again = self._refine_starts(energy, [Pose(refined[i]) for i in again_for])
+            lowered = []
+            for i, y in zip(again_for, again, strict=True):
                 score = self._objective(energy, y, self.config.final_level)
                 if score < scores[i]:
                     refined[i], scores[i] = y, score
+                    lowered.append(i)
+            again_for = lowered
+            if not again_for:
+                break
         return refined, scores
 
     def _extremity_starts(self, energy: SilhouetteEnergy, points: np.ndarray) -> list[Pose]:
@@ -1441,7 +1462,7 @@ class SilhouetteTracker:
                      self._refine_all(energy, seed, init=True))
         if found is None or enough is None or not enough(best_e):
             with suppress(TrackingLost):  # no visual hull: the last good pose's alone
-                consider("the visual hull", self.initialise(masks)[0].params)
+                consider("the visual hull", self.initialise(masks, enough=enough)[0].params)
         # A recovered pose has no velocity; the tracked one keeps its own.
         self.history = history if found is None else []
         return best_x, best_e, found

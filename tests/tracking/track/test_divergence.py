@@ -183,7 +183,7 @@ def test_a_recovery_searches_the_hull_only_when_the_last_good_pose_is_not_enough
         assert tracker.track(frame, _masks(pose), init=walk[0] if frame == 0 else None).pose
     searched = []
 
-    def hull_search(masks, init=None):
+    def hull_search(masks, init=None, enough=None):
         searched.append(init)
         return shown, "the stand-in"
 
@@ -202,11 +202,16 @@ def test_a_recovery_searches_the_hull_only_when_the_last_good_pose_is_not_enough
             assert found == "the last good pose (frame 5)" and e < before, (found, e, before)
 
 
-@pytest.mark.parametrize("passes", [1, 2, 3])
-def test_a_recovery_gives_its_two_best_starts_more_passes(passes):
-    """`_pass_again`: of a recovery's refined starts, the two of lowest score (here x[0]; a
-    stand-in refinement moves it) get ``recovery_passes - 1`` more passes of the hierarchy,
-    each result kept only where it scores lower; the other starts are left as they are."""
+@pytest.mark.parametrize(("passes", "enough_under", "again"), [
+    (1, None, []), (2, None, [[1.0, 2.0]]), (3, None, [[1.0, 2.0], [0.5]]),
+    (4, None, [[1.0, 2.0], [0.5], [0.0]]), (3, 0.6, [[1.0, 2.0]]), (4, 0.2, [[1.0, 2.0], [0.5]]),
+])
+def test_a_recovery_gives_its_two_best_starts_more_passes(passes, enough_under, again):
+    """`_pass_again`: of a recovery's refined starts, the two of lowest score (x[0]) get a
+    second pass of the hierarchy, and up to ``recovery_passes - 2`` more while the best is not
+    enough (its energy, here x[0] too, not under `enough_under`; None: never enough), these
+    only for the starts the pass before lowered. A stand-in refinement lowers the best start
+    by 0.5 a pass and raises the second (not kept); the other starts are left as they are."""
     from tests.tracking.track.test_tracker import CAMERAS, SHAPE
 
     config = TrackConfig(body="superquadric", recovery_passes=passes)
@@ -215,16 +220,17 @@ def test_a_recovery_gives_its_two_best_starts_more_passes(passes):
 
     def refine_starts(energy, starts):
         refined_again.append([float(p.params[0]) for p in starts])
-        # The best start gets lower each pass, the second best higher (not kept).
         return [p.params + np.r_[-0.5 if p.params[0] < 2 else 1.0, np.zeros(25)]
                 for p in starts]
 
     tracker._refine_starts = refine_starts
     tracker._objective = lambda energy, x, level: float(x[0])
+    enough = None if enough_under is None else (lambda e: e < enough_under)
     starts = [np.r_[v, np.zeros(25)] for v in (3.0, 1.0, 5.0, 2.0)]
-    refined, scores = tracker._pass_again(None, starts, [3.0, 1.0, 5.0, 2.0])
-    assert refined_again == [[1.0 - 0.5 * k, 2.0] for k in range(passes - 1)]
-    assert scores == [3.0, 1.0 - 0.5 * (passes - 1), 5.0, 2.0]
+    refined, scores = tracker._pass_again(lambda pose: float(pose.params[0]), starts,
+                                          [3.0, 1.0, 5.0, 2.0], enough)
+    assert refined_again == again
+    assert scores == [3.0, 1.0 - 0.5 * len(again), 5.0, 2.0]
     assert [x[0] for x in refined] == scores
     with pytest.raises(UserError, match="--recovery-passes must be >= 1"):
         TrackConfig(recovery_passes=0)

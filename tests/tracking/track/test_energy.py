@@ -161,6 +161,10 @@ def test_the_xor_counted_without_drawing_equals_the_drawn_xor(setup, renderer_na
     static = [renderer.render(model.posed_vertices(truth), model.faces[~moving], c)
               for c in cameras]  # fmt: skip
     count = XorCount(renderer, cameras, masks, known, static)
+    # A second counter of the same views, counted in turn with the first: they share one
+    # stamps image (`tracking.track.render._stamps`), each count under its own token.
+    whole = XorCount(renderer, cameras, masks, known)
+    assert whole.views.stamps is count.views.stamps
     for k in range(4):
         pose = Pose(truth.params + rng.normal(0.0, 0.15, truth.params.shape) * (k > 0))
         vertices = model.posed_vertices(pose)
@@ -168,6 +172,9 @@ def test_the_xor_counted_without_drawing_equals_the_drawn_xor(setup, renderer_na
         expected = [np.count_nonzero(((s | d) ^ m) & kn)
                     for s, d, m, kn in zip(static, drawn, masks, known, strict=True)]  # fmt: skip
         assert count.counts(vertices, model.faces[moving]).tolist() == expected
+        drawn = [renderer.render(vertices, model.faces, c) for c in cameras]
+        assert whole.counts(vertices, model.faces).tolist() == [
+            np.count_nonzero((d ^ m) & kn) for d, m, kn in zip(drawn, masks, known, strict=True)]
     # The energy's own count (no static part) is its drawn XOR masks' count.
     energy = SilhouetteEnergy(model, cameras, masks, renderer, levels=2, known=known)
     for level in (0, 1):
