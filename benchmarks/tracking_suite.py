@@ -201,6 +201,36 @@ Session 32, three ways to a faster recovery or frame measured and dropped (not l
   hull's search then skipped): enough in 1 of the 5 recoveries of the pirouette, cartwheel (60
   frames) and bend_pickup (30), by 0.199 against a bar near 0.200, for 0.6 s on every one.
 
+Session 33, speed with the same poses (joints.csv byte-identical on the 60-frame pirouette):
+the outline refinement's per-view rows compiled (`tracking.track.outline_kernel`; a system
+4.66 -> 1.62 ms, `benchmarks/outline_system.py`; a tracked frame 0.25 -> 0.19 s), a stage's
+XOR counter made in its int8 image with one stamps image per shape (a limb stage's set-up
+2.24 -> 1.37 ms), and the visual hull's block test on the distance transform of the
+silhouette's box (a frame's hull 41 -> 29 ms; the same hull). Interleaved runs of the
+pirouette before and after: 69 -> 58 s, then 56-72 s for the same code as the machine
+drifted. All 15 clips, 60 frames, nothing else running: **1.04-2.05 frames/s**, the
+cartwheel 1.04 and the pirouette 1.10 (met); the fastest of 2 runs, ``--clips cartwheel
+turn_pirouette --repeats 2``: 1.07 and 1.16. Mean 17.9 mm (17.1 before): the 14 other clips
+unchanged, but the cartwheel 35.1 -> **47.0** mm. The compiled rows differ from numpy's by
+3e-16 of the largest entry (BLAS sums in another order), and the cartwheel's track differs
+from its recovery at frame 25 on (XOR 0.254 -> 0.256, 62 -> 60 mm there); its frames 38-48
+then slide to 77-130 mm, flagged unexplained (27 frames flagged, none over 100 mm
+unflagged), where before they stayed at 55-70. Its 35.1 was one outcome of a track that
+1e-16 changes. 30 frames: 13 of 15 clips at 1 frame/s or more (0.73-1.25; 5 of 15 before),
+mean 16.2 mm; but the cartwheel's frame 29, recovered in session 32 by the second pass
+(0.242), ended it at 0.302, still a divergence, unrecovered. Hence the passes after the
+second (``--recovery-passes`` 3): only while the best start is still a divergence, and only
+for the starts the pass before improved; frame 29 recovered at 0.228 (cartwheel 40.6 mm);
+recoveries settled after two passes run none (the 60-frame cartwheel and pirouette, and
+bend_pickup at 30 frames, byte-identical). Under 1 frame/s at 30 frames: the cartwheel 0.74
+and bend_pickup 0.74 (0.85 before the third pass, which its frame 22 runs, still diverged),
+each with a full recovery in 30 frames. The Pose2Sim demo (``benchmarks/tracking_pose2sim.py
+--trackers mpfb``): 100/100 frames, median IoU 0.827 (unchanged). Measured and dropped: the next frame's silhouettes,
+mask pyramid, outline distance fields and hull made on a thread while a frame is tracked
+(60-70 ms of a frame's work): the pirouette 56-58 -> 67 s, the compiled calls that release
+the GIL waiting to take it back from the thread's numpy; and a hull fit from 2 orientations,
+not 4, in the tracker's start (1.2 s a search): the fit differed at 6 of 7 start frames.
+
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
 with one other job, so frames/s are low bounds). MPJPE (offsets out), worst joint, frames/s,
