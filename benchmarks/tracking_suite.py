@@ -225,8 +225,9 @@ recoveries settled after two passes run none (the 60-frame cartwheel and pirouet
 bend_pickup at 30 frames, byte-identical). Under 1 frame/s at 30 frames: the cartwheel 0.74
 and bend_pickup 0.74 (0.85 before the third pass, which its frame 22 runs, still diverged),
 each with a full recovery in 30 frames. The Pose2Sim demo (``benchmarks/tracking_pose2sim.py
---trackers mpfb``): 100/100 frames, median IoU 0.827 (unchanged). Measured and dropped: the next frame's silhouettes,
-mask pyramid, outline distance fields and hull made on a thread while a frame is tracked
+--trackers mpfb``): 100/100 frames, median IoU 0.827 (unchanged). Measured and dropped: the
+next frame's silhouettes, mask pyramid, outline distance fields and hull made on a thread
+while a frame is tracked
 (60-70 ms of a frame's work): the pirouette 56-58 -> 67 s, the compiled calls that release
 the GIL waiting to take it back from the thread's numpy; and a hull fit from 2 orientations,
 not 4, in the tracker's start (1.2 s a search): the fit differed at 6 of 7 start frames.
