@@ -171,19 +171,12 @@ class ViewGains:
     past a smaller view's size; per view an (H, W) int64 scratch image (``stamps``: each pixel
     counted once); the cameras' parameters stacked."""
 
-    def __init__(self, cameras: Sequence[Camera], gains: Sequence[np.ndarray] | None = None
-                 ) -> None:  # fmt: skip
-        """gains: per camera, its (H, W) gains; None: zero, to be set in `gains` (views of
-        `stacked`)."""
+    def __init__(self, cameras: Sequence[Camera]) -> None:
+        """The gains zero: the caller sets them in `gains` (views into `stacked`)."""
         self.cameras = list(cameras)
-        if gains is not None and [np.shape(g) for g in gains] != [(c.height, c.width)
-                                                                  for c in self.cameras]:
-            raise ValueError("need one (height, width) gain image per camera")
         shape = (len(self.cameras), max((c.height for c in self.cameras), default=0),
                  max((c.width for c in self.cameras), default=0))
         self.stacked = np.zeros(shape, np.int8)
-        for view, gain in zip(self.stacked, gains or [], strict=False):
-            view[:gain.shape[0], :gain.shape[1]] = gain
         self.stamps = _stamps(shape)
         self.cams_from_world = np.array([c.cam_from_world for c in self.cameras]).reshape(-1, 3, 4)
         self.Ks = np.array([c.K for c in self.cameras]).reshape(-1, 3, 3)
