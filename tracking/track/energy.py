@@ -82,8 +82,8 @@ class XorCount:
         statics = static or [None] * len(masks)
         base = []
         # Made in the int8 image they are counted from: a stage makes one of these for every
-        # few dozen evaluations, and np.where's int64 temporaries with new zeroed stamps made
-        # it 3.49 ms at 640x480, against 0.34 now (session 33).
+        # few dozen evaluations, and np.where's int64 temporaries made it 3.49 ms at
+        # 640x480, against 0.34 now (session 33).
         self.views = ViewGains(cameras)
         for gain, s, m, k in zip(self.views.gains, statics, masks, known, strict=True):
             m = np.asarray(m, bool)

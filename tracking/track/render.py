@@ -13,11 +13,10 @@ distortion is honoured through :class:`~tracking.rig.cameras.Camera`.
   triangle edges stay straight between distorted vertices: exact for a pinhole camera, far
   below a pixel for small triangles) and a scanline fill marks every covered pixel centre,
   both compiled by numba in one call per view (`tracking.track.raster`). For the energy it
-  can count rather than draw (`covered_gains`: a per-pixel gain summed over the covered
-  pixels, every view in one call). The same integers: tracks are identical. What it saves
-  is small: the tracker's energy evaluations per second rose about 10% on the suite's walk,
-  whose `mocap track` took as long within the machine's noise (old and new run in turn:
-  91-106 s against 93-102 s; session 23).
+  counts rather than draws (`covered_gains`: a per-pixel gain summed over the covered
+  pixels, every view in one call), from the mesh's outline in each row rather than from
+  every triangle: the same integers, 1.1-1.8x faster than visiting each triangle's pixels
+  (`benchmarks/xor_count.py`; session 34).
   Triangles with a vertex behind the near plane (``near_m``) are dropped, not clipped.
 * ``open3d-raycast``: Open3D's Embree ray caster on the CPU, one ray through every pixel
   centre (the undistorted ray, so distortion is exact). The reference of the agreement tests.
@@ -32,7 +31,6 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import itertools
 import os
 import subprocess
 import sys
@@ -152,24 +150,20 @@ def render_views(renderer: Any, vertices_in_world: Any, faces: Any,
             for c in cameras]  # fmt: skip
 
 
-_TOKENS = itertools.count(1)
-"""`covered_gains`' count tokens: one per call, never reused (the stamps need no clearing)."""
+@functools.lru_cache(maxsize=32)
+def _edges_of(faces: bytes, count: int) -> Any:
+    """`tracking.track.raster.mesh_edges` of `count` faces of int64 `faces` (their bytes):
+    the tracker's stages make new arrays of the same few face sets frame after frame."""
+    from tracking.track.raster import mesh_edges
 
-
-@functools.lru_cache(maxsize=8)
-def _stamps(shape: tuple[int, int, int]) -> np.ndarray:
-    """The (views, H, W) int64 stamps of every `ViewGains` of this shape: the tokens are never
-    reused, so what another count left in them is never its own, and one image serves all.
-    Made anew for each, its 10 MB at 640x480 were zeroed, and their pages faulted in, once
-    for every stage of the hierarchy (session 33)."""
-    return np.zeros(shape, np.int64)
+    return mesh_edges(np.frombuffer(faces, np.int64).reshape(count, 3))
 
 
 class ViewGains:
     """Per view, a per-pixel gain to sum over the pixels a mesh covers (`covered_gains`), with
     what the compiled count needs made once: the gains in one (views, H, W) int8 array, zero
-    past a smaller view's size; per view an (H, W) int64 scratch image (``stamps``: each pixel
-    counted once); the cameras' parameters stacked."""
+    past a smaller view's size; the cameras' parameters stacked; the edges of the last faces
+    counted."""
 
     def __init__(self, cameras: Sequence[Camera]) -> None:
         """The gains zero: the caller sets them in `gains` (views into `stacked`)."""
@@ -177,11 +171,11 @@ class ViewGains:
         shape = (len(self.cameras), max((c.height for c in self.cameras), default=0),
                  max((c.width for c in self.cameras), default=0))
         self.stacked = np.zeros(shape, np.int8)
-        self.stamps = _stamps(shape)
         self.cams_from_world = np.array([c.cam_from_world for c in self.cameras]).reshape(-1, 3, 4)
         self.Ks = np.array([c.K for c in self.cameras]).reshape(-1, 3, 3)
         self.dists = np.array([c.dist for c in self.cameras]).reshape(-1, 5)
         self.max_radius2s = np.array([c.max_radius2 for c in self.cameras], dtype=float)
+        self._faces: tuple[Any, tuple[np.ndarray, Any]] | None = None
 
     @property
     def gains(self) -> list[np.ndarray]:
@@ -189,14 +183,24 @@ class ViewGains:
         return [view[:c.height, :c.width] for view, c in zip(self.stacked, self.cameras,
                                                              strict=True)]  # fmt: skip
 
+    def edges(self, faces: Any) -> tuple[np.ndarray, Any]:
+        """(F, 3) int64 `faces` (checked: `_check_mesh`) and their
+        `tracking.track.raster.MeshEdges`, kept with the array given (held, so that no other
+        array takes its address), which a stage counts thousands of times."""
+        if self._faces is None or self._faces[0] is not faces:
+            tris = np.ascontiguousarray(faces, dtype=np.int64)
+            self._faces = faces, (tris, _edges_of(tris.tobytes(), len(tris)))
+        return self._faces[1]
+
 
 def covered_gains(renderer: Any, vertices_in_world: Any, faces: Any, views: ViewGains
                   ) -> np.ndarray:  # fmt: skip
     """(views,) int: per camera of `views`, the sum of its gain over the pixels the mesh
     covers in that view: what the XOR of a silhouette changes by when the mesh is drawn into
-    it (`tracking.track.energy.XorCount`). ``cpu-raster`` sums while it scans, drawing no mask,
-    every view in one compiled call; any other renderer draws its masks (`render_views`) and
-    they are summed."""
+    it (`tracking.track.energy.XorCount`). ``cpu-raster`` sums while it walks the mesh's
+    outline in each row, drawing no mask, every view in one compiled call
+    (`tracking.track.raster.covered_gains`); any other renderer draws its masks
+    (`render_views`) and they are summed."""
     if not isinstance(renderer, CpuRasterRenderer):
         return np.array([int(gain[mask].sum()) for gain, mask in zip(
             views.gains, render_views(renderer, vertices_in_world, faces, views.cameras),
@@ -206,10 +210,11 @@ def covered_gains(renderer: Any, vertices_in_world: Any, faces: Any, views: View
         return np.zeros(len(views.cameras), np.int64)
     from tracking.track.raster import covered_gains as count
 
+    tris, edges = views.edges(faces)
     winding = -1.0 if renderer.options.cull_back_faces else 0.0
-    return count(np.ascontiguousarray(vertices), tris, views.cams_from_world, views.Ks,
-                 views.dists, renderer.options.near_m, views.max_radius2s, winding,
-                 views.stacked, views.stamps, next(_TOKENS))  # fmt: skip
+    return count(np.ascontiguousarray(vertices), tris, edges.vertices, edges.faces, edges.signs,
+                 views.cams_from_world, views.Ks, views.dists, renderer.options.near_m,
+                 views.max_radius2s, winding, views.stacked)  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------------------

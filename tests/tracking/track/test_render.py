@@ -246,6 +246,38 @@ def test_culling_keeps_triangles_counter_clockwise_from_the_camera():
                           culled.render(front, faces, camera))
 
 
+@pytest.mark.parametrize("cull", [True, False])
+def test_the_count_from_the_outline_is_the_drawn_masks_sum(body, cull):
+    """`render.covered_gains` (the compiled count, from the outline of the kept triangles:
+    `tracking.track.raster.covered_gains`) equals the gains summed over the drawn masks, with
+    culling and without: on the body in random poses and on part of it (an open mesh), and on
+    a triangle soup of few vertices (edges of up to a dozen faces, both windings, faces given
+    twice, faces with a vertex behind the camera, triangles off the image)."""
+    options = [] if cull else ["cull_back_faces=false"]
+    renderer = registry.create("renderer", "cpu-raster", options)
+    rng = np.random.default_rng(11)
+    cameras = _body_cameras()  # a distorted view and a small one among them
+    views = render.ViewGains(cameras)
+    for gain in views.gains:
+        gain[...] = rng.integers(-1, 2, gain.shape)
+    soup = rng.integers(0, 40, (300, 3))
+    soup = np.vstack([soup, soup[:20]])  # 20 faces twice
+    meshes = [(body.posed_vertices(pose), body.faces) for pose in _poses()]
+    meshes.append((meshes[1][0], body.faces[: len(body.faces) // 3]))
+    for camera in cameras[:2]:  # 40 points near the body, 3 of them behind this camera
+        points = camera.center_in_world + rng.normal(0.0, 0.6, (40, 3)) + 0.8 * (
+            body.posed_vertices(_poses()[0]).mean(axis=0) - camera.center_in_world)
+        points[:3] = camera.center_in_world - camera.R[2] * [[0.5], [1.0], [2.0]]
+        meshes.append((points, soup))
+    covered = 0
+    for vertices, faces in meshes:
+        drawn = render.render_views(renderer, vertices, faces, cameras)
+        expected = [int(g[m].sum()) for g, m in zip(views.gains, drawn, strict=True)]
+        assert render.covered_gains(renderer, vertices, faces, views).tolist() == expected
+        covered += sum(np.count_nonzero(m) for m in drawn)
+    assert covered > 50_000
+
+
 def test_bad_meshes_are_refused(renderers):
     renderer = _renderer(renderers, "cpu-raster")
     camera = SPHERE_CAMERAS["pinhole"]
