@@ -232,6 +232,20 @@ while a frame is tracked
 the GIL waiting to take it back from the thread's numpy; and a hull fit from 2 orientations,
 not 4, in the tracker's start (1.2 s a search): the fit differed at 6 of 7 start frames.
 
+Session 34, speed with the same poses: the energy's XOR count from the outline of the kept
+triangles, row by row (`tracking.track.raster.covered_gains`), not from every triangle's
+pixels: the same integers (`benchmarks/xor_count.py`: 1.78x for the whole body at 640x480,
+1.14-1.64x for the coarser levels and the stages' parts), the count 19.4 -> 13.1 s of the
+30-frame cartwheel's 64 s of CPU (one worker). ``mocap track`` of the 30-frame cartwheel,
+old and new in turn: 50.5 and 45.6 s against 43.6 and 42.8 s; joints.csv byte-identical
+(cartwheel and bend_pickup, ``cmp``). All 15 clips, 60 frames, nothing else running: every
+figure of accuracy as in session 33 (mean 17.9 mm, cartwheel 47.0, bend_pickup 49.5, none
+unrecovered, no frame over 100 mm unflagged) and **1.12-2.15 frames/s** (cartwheel 1.12,
+pirouette 1.14; 1.04 and 1.10 in session 33): met, by 12%. 30 frames, ``--clips cartwheel
+bend_pickup``: 40.6 and 49.7 mm as before, 0.82 and 0.93 frames/s (0.74 and 0.74): still
+under 1 (the start 15-16 s and a full recovery of about 10 s in 30 frames). The Pose2Sim demo:
+100/100 frames, median IoU 0.827 (unchanged).
+
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
 with one other job, so frames/s are low bounds). MPJPE (offsets out), worst joint, frames/s,
