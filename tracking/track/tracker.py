@@ -113,10 +113,9 @@ from tracking.silhouettes.hull import (
     hull_diameter,
     hull_min_views,
     hull_parts,
+    hull_surface_points,
     rays_meeting_point,
     subject_sized,
-    surface_voxels,
-    visual_hull,
 )
 from tracking.track.contour import ContourConfig, ContourRefiner, refine_shape
 from tracking.track.divergence import WatchConfig, XorWatch
@@ -652,10 +651,9 @@ class SilhouetteTracker:
         if not all(m.any() for m in masks):
             empty = [c.name for c, m in zip(self.cameras, masks, strict=True) if not m.any()]
             raise TrackingLost(f"empty silhouette in {', '.join(empty)}")
-        points, n, occupied = visual_hull(self.cameras, masks, min_views=hull_min_views(masks),
-                                          size_m=self.config.hull_size_m,
-                                          voxel_m=self.config.voxel_m, unknown=self.unknown)
-        return points[surface_voxels(occupied, n)]
+        return hull_surface_points(self.cameras, masks, min_views=hull_min_views(masks),
+                                   size_m=self.config.hull_size_m, voxel_m=self.config.voxel_m,
+                                   unknown=self.unknown)  # fmt: skip
 
     def subjects_in_view(self, masks: Sequence[np.ndarray]) -> list[HullPart]:
         """The parts of human size of the visual hull of ``masks`` (`hull_parts`,

@@ -14,6 +14,7 @@ from tracking.silhouettes.hull import (
     consistent_silhouettes,
     hull_diameter,
     hull_silhouettes,
+    hull_surface_points,
     rays_meeting_point,
     surface_voxels,
     visual_hull,
@@ -33,6 +34,9 @@ def test_the_visual_hull_of_a_ball_holds_the_ball():
     assert occupied.sum() * 0.03**3 < 1.6 * (4 / 3) * np.pi * 0.3**3
     surface = surface_voxels(occupied, n)
     assert surface.sum() < occupied.sum() and not surface[distance < 0.2].any()
+    # What the tracker takes: the surface voxels' centres, made without the cube's.
+    assert np.array_equal(hull_surface_points(CAMERAS, masks, size_m=1.2, voxel_m=0.03),
+                          points[surface])
 
 
 def test_the_hull_silhouettes_bound_what_a_model_can_reach():
