@@ -244,7 +244,14 @@ unrecovered, no frame over 100 mm unflagged) and **1.12-2.15 frames/s** (cartwhe
 pirouette 1.14; 1.04 and 1.10 in session 33): met, by 12%. 30 frames, ``--clips cartwheel
 bend_pickup``: 40.6 and 49.7 mm as before, 0.82 and 0.93 frames/s (0.74 and 0.74): still
 under 1 (the start 15-16 s and a full recovery of about 10 s in 30 frames). The Pose2Sim demo:
-100/100 frames, median IoU 0.827 (unchanged).
+100/100 frames, median IoU 0.827 (unchanged). Then a frame's hull surface without the cube's
+87**3 centres (`hull.hull_surface_points`, the same floats; 34 -> 27 ms a hull): all 15
+clips again, joints.csv byte-identical to the run above (``cmp``), **1.15-2.37 frames/s**
+(cartwheel 1.21, pirouette 1.15, its start 18 s against 13-15 for the others: the machine
+drifts). 30 frames, all 15: mean 16.2 mm, none above 50, none unrecovered; 0.69-1.67
+frames/s, 12 of 15 at 1 or more; under it the cartwheel (0.69, its start 19 s in this run
+against 16 before), bend_pickup (0.95) and the walk (0.98, the run's first clip, its start
+21 s against 11-15 for the others).
 
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
