@@ -1,8 +1,8 @@
 """The energy's XOR count (`tracking.track.render.covered_gains`, compiled in
 `tracking.track.raster.covered_gains`: the gains summed along the outline of the kept
 triangles, row by row) against the count it replaced, each triangle's pixels visited and
-marked in a stamps image so that each pixel counts once (session 33's, kept below as the
-reference), in the same run.
+marked in a stamps image so that each pixel counts once (session 33's: `REFERENCE`'s
+`tracking.track.raster`, read from git), in the same run.
 
     .venv/bin/python benchmarks/xor_count.py [--poses 64] [--repeats 5]
 
@@ -19,72 +19,45 @@ whether every count is the same integer.
 from __future__ import annotations
 
 import argparse
+import importlib.util
+import subprocess
+import tempfile
 import time
+from pathlib import Path
+from typing import Any
 
-import numba
 import numpy as np
 
 from plugins.registry import create
 from tracking.body.model import LOWER_LIMITS, UPPER_LIMITS, Pose
 from tracking.rig.cameras import ring_cameras
 from tracking.track.energy import XorCount
-from tracking.track.raster import project_vertices
 from tracking.track.render import covered_gains, render_views
 from tracking.track.tracker import _LIMBS, _MOVES, _ROOT, _TRUNK
 
+REFERENCE = "37441dd"
+"""The commit whose `tracking.track.raster` (session 33's stamped count) is the reference."""
 
-@numba.njit(cache=True, nogil=True)
-def _stamped_count(vertices, faces, cams_from_world, Ks, dists, near_m, max_radius2s,
-                   keep_winding, gains, stamps, token):  # fmt: skip
-    """Session 33's count: every kept triangle's rows scanned (`fill_triangles`), each pixel
-    summed once (``stamps`` set to ``token`` where counted)."""
-    totals = np.zeros(gains.shape[0], np.int64)
-    uv = np.empty((vertices.shape[0], 2))
-    for v in range(gains.shape[0]):
-        project_vertices(vertices, cams_from_world[v], Ks[v], dists[v], near_m,
-                         max_radius2s[v], uv)  # fmt: skip
-        gain, stamp, height, width = gains[v], stamps[v], gains.shape[1], gains.shape[2]
-        total = 0
-        for f in range(faces.shape[0]):
-            a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
-            ax, ay, bx, by, cx, cy = uv[a, 0], uv[a, 1], uv[b, 0], uv[b, 1], uv[c, 0], uv[c, 1]
-            if not (np.isfinite(ax) and np.isfinite(bx) and np.isfinite(cx)
-                    and np.isfinite(ay) and np.isfinite(by) and np.isfinite(cy)):
-                continue
-            if keep_winding != 0.0:
-                area = (bx - ax) * (cy - ay) - (cx - ax) * (by - ay)
-                if area * keep_winding < 0.0:
-                    continue
-            swap = by < ay
-            tx, ty = (bx, by) if swap else (ax, ay)
-            mx, my = (ax, ay) if swap else (bx, by)
-            swap = cy < my
-            bx, by = (mx, my) if swap else (cx, cy)
-            mx, my = (cx, cy) if swap else (mx, my)
-            swap = my < ty
-            tx, ty, mx, my = (mx, my, tx, ty) if swap else (tx, ty, mx, my)
-            y0, y1 = max(np.ceil(ty - 0.5), 0.0), min(np.floor(by - 0.5), height - 1.0)
-            if y1 < y0:
-                continue
-            k_long = (bx - tx) / (by - ty) if by != ty else 0.0
-            k_top = (mx - tx) / (my - ty) if my != ty else 0.0
-            k_bottom = (bx - mx) / (by - my) if by != my else 0.0
-            for row in range(int(y0), int(y1) + 1):
-                yc = row + 0.5
-                x_long = tx + (yc - ty) * k_long
-                x_short = tx + (yc - ty) * k_top if yc < my else mx + (yc - my) * k_bottom
-                i0 = max(np.ceil(min(x_long, x_short) - 0.5), 0.0)
-                i1 = min(np.floor(max(x_long, x_short) - 0.5), width - 1.0)
-                for col in range(int(i0), int(i1) + 1):
-                    if stamp[row, col] != token:
-                        stamp[row, col] = token
-                        total += gain[row, col]
-        totals[v] = total
-    return totals
+
+def _reference_kernels(commit: str, folder: Path) -> Any:
+    """`tracking.track.raster` as of `commit` (from this checkout's git history, written to
+    `folder` so that numba can cache it), or None without git or that commit."""
+    try:
+        source = subprocess.run(["git", "show", f"{commit}:tracking/track/raster.py"],
+                                cwd=Path(__file__).resolve().parents[1], check=True,
+                                capture_output=True, text=True).stdout  # fmt: skip
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    path = folder / f"raster_{commit}.py"
+    path.write_text(source)
+    spec = importlib.util.spec_from_file_location(f"raster_{commit}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def _compare(renderer, views, faces: np.ndarray, vertices: list[np.ndarray], repeats: int,
-             ) -> tuple[dict[str, float], bool]:  # fmt: skip
+             reference: Any) -> tuple[dict[str, float], bool]:  # fmt: skip
     """ms per count of each method (the fastest of `repeats` passes over `vertices`), and
     whether they gave the same integers."""
     stamps = np.zeros(views.stacked.shape, np.int64)
@@ -92,9 +65,10 @@ def _compare(renderer, views, faces: np.ndarray, vertices: list[np.ndarray], rep
     faces64 = faces.astype(np.int64)
 
     def stamped(v: np.ndarray) -> np.ndarray:
-        return _stamped_count(v, faces64, views.cams_from_world, views.Ks, views.dists,
-                              renderer.options.near_m, views.max_radius2s, -1.0, views.stacked,
-                              stamps, next(tokens))  # fmt: skip
+        return reference.covered_gains(v, faces64, views.cams_from_world, views.Ks,
+                                       views.dists, renderer.options.near_m,
+                                       views.max_radius2s, -1.0, views.stacked, stamps,
+                                       next(tokens))  # fmt: skip
 
     def outline(v: np.ndarray) -> np.ndarray:
         return covered_gains(renderer, v, faces, views)
@@ -116,7 +90,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--poses", type=int, default=64)
     parser.add_argument("--repeats", type=int, default=5, help="the fastest of this many")
+    parser.add_argument("--reference", default=REFERENCE,
+                        help="the commit whose stamped count is compared (session 33's)")
     args = parser.parse_args()
+    folder = tempfile.TemporaryDirectory()
+    reference = _reference_kernels(args.reference, Path(folder.name))
+    if reference is None:
+        raise SystemExit(f"xor_count: no git history with commit {args.reference} here (the "
+                         "reference count is read from it)")
     ring = ring_cameras(4, 4.0, 1.5, (0.0, 0.9, 0.0), 640, 480, 686.2)
     renderer = create("renderer", "cpu-raster")
     model = create("body", "mpfb").tracking_model(1.75)
@@ -132,7 +113,7 @@ def main() -> None:
     parts = {name: model.faces_moved_by(_MOVES[free].any(axis=0)) for name, free in (
         ("body", _ROOT), ("trunk", _TRUNK), ("arm", _LIMBS["l_arm"][0]))}
     print(f"XOR count of the mpfb body (5000 faces), 4 views, {args.poses} poses, the fastest "
-          f"of {args.repeats}")
+          f"of {args.repeats}; stamped: {args.reference}'s")
     print(f"{'level':<7}{'part':<7}{'faces':>6}{'outline ms':>12}{'stamped ms':>12}"
           f"{'ratio':>7}  same")
     for level in range(3):
@@ -144,7 +125,7 @@ def main() -> None:
             ids = np.unique(faces)
             vertices = [np.ascontiguousarray(v[ids]) for v in posed]
             best, same = _compare(renderer, count.views, np.searchsorted(ids, faces), vertices,
-                                  args.repeats)  # fmt: skip
+                                  args.repeats, reference)  # fmt: skip
             print(f"{level:<7}{part:<7}{len(faces):>6}{best['outline']:>12.3f}"
                   f"{best['stamped']:>12.3f}{best['stamped'] / best['outline']:>7.2f}  {same}")
 
