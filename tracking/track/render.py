@@ -51,16 +51,31 @@ DEFAULT_RENDERER = "cpu-raster"
 
 
 def _check_mesh(vertices_in_world: Any, faces: Any) -> tuple[np.ndarray, np.ndarray]:
-    vertices = np.asarray(vertices_in_world, dtype=np.float64)
+    tris, top = _checked_faces(faces)
+    return _checked_vertices(vertices_in_world, tris, top), tris
+
+
+def _checked_faces(faces: Any) -> tuple[np.ndarray, int]:
+    """(F, 3) int64 faces, and their largest vertex index (-1 for none); one-line errors."""
     tris = np.asarray(faces)
-    if vertices.ndim != 2 or vertices.shape[1] != 3 or tris.ndim != 2 or tris.shape[1] != 3:
-        raise ValueError(f"need vertices (V, 3) and faces (F, 3), got {vertices.shape} and "
-                         f"{tris.shape}")
+    if tris.ndim != 2 or tris.shape[1] != 3:
+        raise ValueError(f"need faces (F, 3), got {tris.shape}")
     if not np.issubdtype(tris.dtype, np.integer):
         raise ValueError(f"faces must be integers, got {tris.dtype}")
-    if tris.size and (tris.min() < 0 or tris.max() >= len(vertices)):
+    if tris.size and tris.min() < 0:
+        raise ValueError("faces index a vertex below 0")
+    return tris.astype(np.int64, copy=False), int(tris.max()) if tris.size else -1
+
+
+def _checked_vertices(vertices_in_world: Any, tris: np.ndarray, top: int) -> np.ndarray:
+    """(V, 3) float64 vertices, which the faces' largest index `top` must be within."""
+    vertices = np.asarray(vertices_in_world, dtype=np.float64)
+    if vertices.ndim != 2 or vertices.shape[1] != 3:
+        raise ValueError(f"need vertices (V, 3) and faces (F, 3), got {vertices.shape} and "
+                         f"{tris.shape}")
+    if top >= len(vertices):
         raise ValueError(f"faces index vertices outside 0..{len(vertices) - 1}")
-    return vertices, tris.astype(np.int64, copy=False)
+    return vertices
 
 
 # ---------------------------------------------------------------------------------------------
@@ -175,7 +190,7 @@ class ViewGains:
         self.Ks = np.array([c.K for c in self.cameras]).reshape(-1, 3, 3)
         self.dists = np.array([c.dist for c in self.cameras]).reshape(-1, 5)
         self.max_radius2s = np.array([c.max_radius2 for c in self.cameras], dtype=float)
-        self._faces: tuple[Any, tuple[np.ndarray, Any]] | None = None
+        self._faces: tuple[Any, tuple[np.ndarray, int, Any]] | None = None
 
     @property
     def gains(self) -> list[np.ndarray]:
@@ -183,13 +198,15 @@ class ViewGains:
         return [view[:c.height, :c.width] for view, c in zip(self.stacked, self.cameras,
                                                              strict=True)]  # fmt: skip
 
-    def edges(self, faces: Any) -> tuple[np.ndarray, Any]:
-        """(F, 3) int64 `faces` (checked: `_check_mesh`) and their
-        `tracking.track.raster.MeshEdges`, kept with the array given (held, so that no other
-        array takes its address), which a stage counts thousands of times."""
+    def edges(self, faces: Any) -> tuple[np.ndarray, int, Any]:
+        """(F, 3) int64 `faces` (checked: `_checked_faces`), their largest vertex index and
+        their `tracking.track.raster.MeshEdges`, kept with the array given (held, so that no
+        other array takes its address), which a stage counts thousands of times: its checks
+        (its smallest and largest index) and the edges once."""
         if self._faces is None or self._faces[0] is not faces:
-            tris = np.ascontiguousarray(faces, dtype=np.int64)
-            self._faces = faces, (tris, _edges_of(tris.tobytes(), len(tris)))
+            tris, top = _checked_faces(faces)
+            tris = np.ascontiguousarray(tris)
+            self._faces = faces, (tris, top, _edges_of(tris.tobytes(), len(tris)))
         return self._faces[1]
 
 
@@ -205,12 +222,12 @@ def covered_gains(renderer: Any, vertices_in_world: Any, faces: Any, views: View
         return np.array([int(gain[mask].sum()) for gain, mask in zip(
             views.gains, render_views(renderer, vertices_in_world, faces, views.cameras),
             strict=True)])
-    vertices, tris = _check_mesh(vertices_in_world, faces)
+    tris, top, edges = views.edges(faces)
+    vertices = _checked_vertices(vertices_in_world, tris, top)
     if not len(tris) or not len(views.cameras):
         return np.zeros(len(views.cameras), np.int64)
     from tracking.track.raster import covered_gains as count
 
-    tris, edges = views.edges(faces)
     winding = -1.0 if renderer.options.cull_back_faces else 0.0
     return count(np.ascontiguousarray(vertices), tris, edges.vertices, edges.faces, edges.signs,
                  views.cams_from_world, views.Ks, views.dists, renderer.options.near_m,

@@ -285,3 +285,11 @@ def test_bad_meshes_are_refused(renderers):
         renderer.render(np.zeros((3, 3)), np.array([[0, 1, 3]]), camera)
     with pytest.raises(ValueError, match=r"\(V, 3\)"):
         renderer.render(np.zeros((3, 2)), np.array([[0, 1, 2]]), camera)
+    # The count checks its faces once per array (`ViewGains.edges`), the vertices every time.
+    views = render.ViewGains([camera])
+    faces = np.array([[0, 1, 2]])
+    assert render.covered_gains(renderer, np.eye(3), faces, views).tolist() == [0]
+    with pytest.raises(ValueError, match="faces index"):
+        render.covered_gains(renderer, np.eye(3)[:2], faces, views)
+    with pytest.raises(ValueError, match="faces index"):
+        render.covered_gains(renderer, np.eye(3), np.array([[0, -1, 2]]), views)
