@@ -200,14 +200,18 @@ class ViewGains:
 
     def edges(self, faces: Any) -> tuple[np.ndarray, int, Any]:
         """(F, 3) int64 `faces` (checked: `_checked_faces`), their largest vertex index and
-        their `tracking.track.raster.MeshEdges`, kept with the array given (held, so that no
-        other array takes its address), which a stage counts thousands of times: its checks
-        (its smallest and largest index) and the edges once."""
-        if self._faces is None or self._faces[0] is not faces:
-            tris, top = _checked_faces(faces)
-            tris = np.ascontiguousarray(tris)
-            self._faces = faces, (tris, top, _edges_of(tris.tobytes(), len(tris)))
-        return self._faces[1]
+        their `tracking.track.raster.MeshEdges`. A read-only array (a model's faces, a
+        stage's) is checked once and kept with its answer (held, so that no other array
+        takes its address): a stage counts it thousands of times. Any other is checked, and
+        its edges looked up by its contents, every time (it may have changed)."""
+        if self._faces is not None and self._faces[0] is faces:
+            return self._faces[1]
+        tris, top = _checked_faces(faces)
+        tris = np.array(tris, order="C")  # the count's own copy: nothing changes it
+        answer = tris, top, _edges_of(tris.tobytes(), len(tris))
+        if isinstance(faces, np.ndarray) and not faces.flags.writeable:
+            self._faces = faces, answer
+        return answer
 
 
 def covered_gains(renderer: Any, vertices_in_world: Any, faces: Any, views: ViewGains

@@ -543,6 +543,7 @@ class _StageEnergy:
         # Only the vertices of the moving faces are drawn (and projected).
         self.vertex_ids = np.unique(self.faces)
         self.local_faces = np.searchsorted(self.vertex_ids, self.faces)
+        self.local_faces.flags.writeable = False  # counted as is (`ViewGains.edges`)
         self.pixel_area = energy._pixel_area[level]
         self.evaluations = 0
 

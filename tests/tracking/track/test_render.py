@@ -285,11 +285,22 @@ def test_bad_meshes_are_refused(renderers):
         renderer.render(np.zeros((3, 3)), np.array([[0, 1, 3]]), camera)
     with pytest.raises(ValueError, match=r"\(V, 3\)"):
         renderer.render(np.zeros((3, 2)), np.array([[0, 1, 2]]), camera)
-    # The count checks its faces once per array (`ViewGains.edges`), the vertices every time.
+    # The count checks a read-only face array once (`ViewGains.edges`), the vertices every
+    # time; a writeable one every time: changed in place, it is counted as it is now.
     views = render.ViewGains([camera])
     faces = np.array([[0, 1, 2]])
+    faces.flags.writeable = False
     assert render.covered_gains(renderer, np.eye(3), faces, views).tolist() == [0]
     with pytest.raises(ValueError, match="faces index"):
         render.covered_gains(renderer, np.eye(3)[:2], faces, views)
     with pytest.raises(ValueError, match="faces index"):
         render.covered_gains(renderer, np.eye(3), np.array([[0, -1, 2]]), views)
+    square = np.array([[-0.3, -0.3, 0.0], [0.3, -0.3, 0.0], [0.3, 0.3, 0.0], [-0.3, 0.3, 0.0]])
+    views.gains[0][...] = 1
+    two = np.array([[0, 2, 1], [0, 3, 2]])  # facing the camera
+    both = render.covered_gains(renderer, square, two, views)[0]
+    two[1] = [0, 3, 3]  # the second triangle gone (a line), in place
+    assert 0 < render.covered_gains(renderer, square, two, views)[0] < both
+    two[1] = [0, 3, 4]
+    with pytest.raises(ValueError, match="faces index"):
+        render.covered_gains(renderer, square, two, views)
