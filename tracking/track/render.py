@@ -207,11 +207,12 @@ class ViewGains:
         if self._faces is not None and self._faces[0] is faces:
             return self._faces[1]
         tris, top = _checked_faces(faces)
-        tris = np.array(tris, order="C")  # the count's own copy: nothing changes it
-        answer = tris, top, _edges_of(tris.tobytes(), len(tris))
-        if isinstance(faces, np.ndarray) and not faces.flags.writeable:
-            self._faces = faces, answer
-        return answer
+        if not (isinstance(faces, np.ndarray) and not faces.flags.writeable):
+            tris = np.ascontiguousarray(tris)
+            return tris, top, _edges_of(tris.tobytes(), len(tris))
+        tris = np.array(tris, order="C")  # kept: a copy of its own, whatever else shares it
+        self._faces = faces, (tris, top, _edges_of(tris.tobytes(), len(tris)))
+        return self._faces[1]
 
 
 def covered_gains(renderer: Any, vertices_in_world: Any, faces: Any, views: ViewGains
