@@ -520,6 +520,58 @@ def splat(camera: Camera, proj: Projection, on: np.ndarray, voxel_m: float,
     return under[:h, :w].astype(bool)
 
 
+def lowest_band(points: np.ndarray, up: np.ndarray, band_m: float) -> np.ndarray:
+    """(N,) bool: the voxels ``points`` (N, 3) within ``band_m`` of the lowest along ``up``
+    (a unit vector)."""
+    height = np.asarray(points, float) @ np.asarray(up, float)
+    return height < height.min() + band_m if len(height) else np.zeros(0, bool)
+
+
+def floor_only(points: np.ndarray, up: np.ndarray, *, band_m: float,
+               voxel_m: float) -> np.ndarray:  # fmt: skip
+    """(N,) bool: the voxels ``points`` (N, 3) under a gap at the hull's bottom: below its
+    lowest layer (``voxel_m`` thick across ``up``) that holds no voxel, when they lie within
+    ``band_m`` of the lowest. A floor shadow's slab under feet off the floor; none when the
+    body stands on the slab, or there is no slab."""
+    points = np.asarray(points, float)
+    if not len(points):
+        return np.zeros(0, bool)
+    height = points @ np.asarray(up, float)
+    layer = np.round((height - height.min()) / voxel_m).astype(np.int64)
+    held = np.zeros(int(np.ceil(band_m / voxel_m)) + 1, bool)
+    held[layer[layer < len(held)]] = True
+    empty = np.flatnonzero(~held)
+    if not len(empty) or empty[0] * voxel_m > band_m:  # what lies under it: above the band
+        return np.zeros(len(points), bool)
+    return layer < empty[0]
+
+
+def lowest_band_pixels(cameras: Sequence[Camera], masks: Sequence[np.ndarray],
+                       points: np.ndarray, up: np.ndarray, *, band_m: float,
+                       voxel_m: float) -> list[np.ndarray]:  # fmt: skip
+    """Per view, the (H, W) bool pixels of ``masks`` that the visual hull's lowest band covers
+    and nothing above it does: the voxels ``points`` (N, 3; the hull's surface voxels, whose
+    projection is the hull's) within ``band_m`` of the lowest along ``up`` (a unit vector),
+    against the others (:func:`splat`).
+
+    A cast shadow that background subtraction keeps (`tracking.silhouettes.subtraction`'s test
+    misses dark ones) lies on the floor: every view sees it, so the hull holds it as a slab
+    a few voxels thick at the bottom, and its pixels are the band's alone. So are the lowest
+    few centimetres of a foot on the floor. Empty views, and every view when there are no
+    points, give no pixels."""
+    masks = [np.asarray(m, bool) for m in masks]
+    if not len(points):
+        return [np.zeros_like(m) for m in masks]
+    low = lowest_band(points, up, band_m)
+    out = []
+    for cam, mask in zip(cameras, masks, strict=True):
+        proj = project_voxels(cam, points)
+        band = splat(cam, proj, low & proj.seen, voxel_m)
+        above = splat(cam, proj, ~low & proj.seen, voxel_m)
+        out.append(band & ~above & mask)
+    return out
+
+
 def hull_silhouettes(cameras: Sequence[Camera], masks: Sequence[np.ndarray], *, size_m: float,
                      voxel_m: float, unknown: Sequence[np.ndarray | None] | None = None,
                      ) -> list[np.ndarray]:  # fmt: skip

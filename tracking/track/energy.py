@@ -71,11 +71,13 @@ class XorCount:
     drawn over it, counted without drawing the mesh: the XOR of ``static`` alone plus, over
     the pixels the mesh covers that ``static`` does not, +1 outside the image silhouette and
     -1 inside (`tracking.track.render.covered_gains`); unknown pixels count 0. The same
-    integers as counting ``(static | mesh) ^ image`` over the known pixels."""
+    integers as counting ``(static | mesh) ^ image`` over the known pixels, plus ``missed``
+    (per view, pixels counted as XOR whatever is drawn)."""
 
     def __init__(self, renderer: Any, cameras: Sequence[Camera], masks: Sequence[np.ndarray],
                  known: Sequence[np.ndarray | None],
-                 static: Sequence[np.ndarray] | None = None) -> None:  # fmt: skip
+                 static: Sequence[np.ndarray] | None = None,
+                 missed: Sequence[int] | None = None) -> None:  # fmt: skip
         from tracking.track.render import ViewGains
 
         self.renderer, self.cameras = renderer, cameras
@@ -94,7 +96,8 @@ class XorCount:
                 gain[s] = 0
             if k is not None:
                 gain[~k] = 0
-        self.base = np.array(base)
+        # Pixels counted whatever the mesh covers (`SilhouetteEnergy`'s missed), per view.
+        self.base = np.array(base) + (0 if missed is None else np.asarray(missed))
 
     def counts(self, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
         """(views,) XOR pixel counts (each view's own pixels) with the mesh drawn."""
@@ -107,14 +110,17 @@ class SilhouetteEnergy:
     """XOR energy of a body pose against foreground masks seen by calibrated cameras.
 
     masks[i] is the (H, W) bool foreground of cameras[i] (same size); known[i], when given and
-    not None, the (H, W) bool pixels of that view that count (module docstring). ``renderer`` is a
-    :class:`plugins.protocols.SilhouetteRenderer` instance or the name of one
-    (``"cpu-raster"``, ...). ``evaluations`` counts calls of the energy itself.
+    not None, the (H, W) bool pixels of that view that count (module docstring). missed[i], when
+    given and not None: (H, W) bool pixels of that view counted as XOR whatever the pose (the
+    fit does not chase them, and the energy keeps the scale of counting them: the tracker's
+    floor band). ``renderer`` is a :class:`plugins.protocols.SilhouetteRenderer` instance or
+    the name of one (``"cpu-raster"``, ...). ``evaluations`` counts calls of the energy itself.
     """
 
     def __init__(self, model: BodyModel, cameras: Sequence[Camera],
                  masks: Sequence[np.ndarray], renderer: Any, levels: int = 3,
-                 known: Sequence[np.ndarray | None] | None = None) -> None:  # fmt: skip
+                 known: Sequence[np.ndarray | None] | None = None,
+                 missed: Sequence[np.ndarray | None] | None = None) -> None:  # fmt: skip
         if len(cameras) != len(masks) or not cameras:
             raise ValueError(f"need one mask per camera, got {len(cameras)} cameras and "
                              f"{len(masks)} masks")
@@ -135,6 +141,15 @@ class SilhouetteEnergy:
         self.known: list[list[np.ndarray | None]] = []
         """known[level][view]: (h, w) bool pixels that count, or None for all of them."""
         known = list(known) if known is not None else [None] * len(cameras)
+        missed = list(missed) if missed is not None else [None] * len(cameras)
+        if len(known) != len(cameras) or len(missed) != len(cameras):
+            raise ValueError("need one known and one missed mask (or None) per camera")
+        # The missed pixels count apart (`missed`), in none of the views' XOR.
+        known = [k if m is None else (~np.asarray(m, bool) if k is None
+                                      else np.asarray(k, bool) & ~np.asarray(m, bool))
+                 for k, m in zip(known, missed, strict=True)]  # fmt: skip
+        self.missed: list[np.ndarray] = []
+        """missed[level]: (views,) the missed pixels' count per view, in that level's pixels."""
         self._pixel_area: list[np.ndarray] = []  # full-resolution pixels per pixel, per view
         full = []
         for camera, mask in zip(cameras, masks, strict=True):
@@ -154,6 +169,10 @@ class SilhouetteEnergy:
             self.known.append([None if k is None else np.asarray(k, bool) if level == 0
                                else downsample_mask(k, c.width, c.height)
                                for k, c in zip(known, level_cameras, strict=True)])
+            self.missed.append(np.array([
+                0 if m is None else np.count_nonzero(
+                    m if level == 0 else downsample_mask(m, c.width, c.height))
+                for m, c in zip(missed, level_cameras, strict=True)], dtype=np.int64))
             self._pixel_area.append(np.array([
                 (c0.width * c0.height) / (c.width * c.height)
                 for c0, c in zip(cameras, level_cameras, strict=True)]))
@@ -191,7 +210,8 @@ class SilhouetteEnergy:
         self._check_level(level)
         if self._counts[level] is None:
             self._counts[level] = XorCount(self.renderer, self.cameras[level], self.masks[level],
-                                           self.known[level])  # fmt: skip
+                                           self.known[level],
+                                           missed=self.missed[level])  # fmt: skip
         counts = self._counts[level].counts(self.model.posed_vertices(pose), self.model.faces)
         return counts.astype(float) * self._pixel_area[level]
 

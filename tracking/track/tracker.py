@@ -72,6 +72,21 @@ frame index: a limb grid's half-range is `range_gain` times the change over the 
 frames (which scales with the interval by itself), clipped to angular speeds
 (`min_range_deg_s`, `max_range_deg_s`) times the interval; so are the root simplex's first
 steps and the temporal prior's scales. At 30 fps they are the former per-frame constants.
+
+A cast shadow that background subtraction keeps lies on the floor and every view sees it, so
+the visual hull holds it as a slab at its bottom. Counted, its pixels pull the feet down to
+it, and in the shape pass stretch the legs: the suite's bend_pickup, whose feet float up to
+8 cm above its shadow (`mocap synth` retargets CMU clips without foot contact), was given
+1.66 m for the 1.55-1.57 m of the same subject in the other clips, and tracked 49.7 mm off.
+The pixels that only the hull's lowest `floor_band_m` covers, no voxel above it (the shadow's,
+and the bottom few centimetres of a foot on the floor: `_frame_hull`,
+`tracking.silhouettes.hull.lowest_band_pixels`), count as missed whatever the pose
+(`SilhouetteEnergy`'s ``missed``): the fit does not chase them, and the XOR keeps the scale
+the divergence watch's factors were set on. (Out of the XOR altogether, the suite's median
+XOR fell from ~10% to ~5.6%, and the cartwheel's frame 18, 24 mm off, crossed 1.6 times it,
+a divergence with no recovery in 11 frames.) The start's fit, its height and the starts'
+floor leave out the voxels under a gap at the hull's bottom (`floor_only`): a shadow's slab
+under feet off the floor.
 """
 
 from __future__ import annotations
@@ -110,10 +125,12 @@ from tracking.silhouettes.hull import (
     HullPart,
     check_voxel_grid,
     cut_by_border,
+    floor_only,
     hull_diameter,
     hull_min_views,
     hull_parts,
     hull_surface_points,
+    lowest_band_pixels,
     rays_meeting_point,
     subject_sized,
 )
@@ -391,6 +408,13 @@ class TrackConfig:
                   "those after the second only while the best is still a divergence, and for "
                   "the starts the pass before improved"},
     )  # fmt: skip
+    floor_band_m: float = field(
+        default=0.1,
+        metadata={"help": "height of the visual hull's lowest band, metres, whose pixels no "
+                  "voxel above it covers count as missed whatever the pose, so that the fit "
+                  "does not stretch to a floor shadow that background subtraction kept; the "
+                  "start leaves out the band's voxels under a gap (0 = off)"},
+    )  # fmt: skip
     voxel_m: float = field(default=0.03, metadata={"help": "visual-hull voxel size, metres"})
     hull_size_m: float = field(
         default=2.6, metadata={"help": "side of the visual-hull cube around the subject, metres"}
@@ -450,7 +474,8 @@ class TrackConfig:
             if getattr(self, name) < low:
                 raise UserError(f"{flag(name)} must be >= {low}, got {getattr(self, name)}")
         for name in ("prior_weight", "twist_weight", "range_gain", "spike_xor_factor",
-                     "high_xor_factor", "xor_margin", "max_unexplained_share"):
+                     "high_xor_factor", "xor_margin", "max_unexplained_share",
+                     "floor_band_m"):
             if getattr(self, name) < 0:
                 raise UserError(f"{flag(name)} must be >= 0, got {getattr(self, name)}")
         for name in ("prior_scale_deg_s", "prior_scale_m_s", "twist_scale_deg",
@@ -539,7 +564,7 @@ class _StageEnergy:
             else None
         )
         self.count = XorCount(energy.renderer, self.cameras, energy.masks[level],
-                              energy.known[level], static)  # fmt: skip
+                              energy.known[level], static, energy.missed[level])  # fmt: skip
         # Only the vertices of the moving faces are drawn (and projected).
         self.vertex_ids = np.unique(self.faces)
         self.local_faces = np.searchsorted(self.vertex_ids, self.faces)
@@ -631,7 +656,8 @@ class SilhouetteTracker:
         # (the frame's energy, level, its outline refiner): built once per frame and level
         self._refiner: tuple[SilhouetteEnergy, int, ContourRefiner] | None = None
         self._part: tuple[object, bytes, tuple[float, np.ndarray]] | None = None  # its last
-        self._hull: tuple[object, np.ndarray, np.ndarray] | None = None  # (masks, points, up)
+        # (masks, points, up, band): the frame's hull (`_frame_hull`), for its last masks
+        self._hull: tuple[object, np.ndarray, np.ndarray, list | None] | None = None
         self._mend_failed_at: int | None = None  # the frame of the last mend that found nothing
         self.evaluations = 0
         # How `calibrate_shape` found the pose it returns: the first tracked frame starts from
@@ -702,6 +728,10 @@ class SilhouetteTracker:
         if len(points) < 100:
             raise TrackingLost("the silhouettes do not intersect in a visual hull")
         up = rig_up(self.cameras, points.mean(axis=0))
+        if up is not None and self.config.floor_band_m > 0:
+            # A floor shadow's slab is no body to fit, stand on, or reach with a foot.
+            points = points[~floor_only(points, up, band_m=self.config.floor_band_m,
+                                        voxel_m=self.config.voxel_m)]  # fmt: skip
         # The superquadrics' fit, whatever `mocap fit` defaults to: it is only a start, the
         # silhouettes refine it (a skinned refinement of a hull is slow and no better). Its
         # tests off, the height's too: a hull the upright orientations cannot fit (a body
@@ -954,7 +984,8 @@ class SilhouetteTracker:
     def _energy(self, masks: Sequence[np.ndarray]) -> SilhouetteEnergy:
         assert self.model is not None
         return SilhouetteEnergy(self.model, self.cameras, masks, self.renderer,
-                                levels=self.config.levels, known=self.known)  # fmt: skip
+                                levels=self.config.levels, known=self.known,
+                                missed=self._frame_hull(masks)[2])  # fmt: skip
 
     def _prediction(self) -> tuple[np.ndarray, np.ndarray]:
         """Constant-velocity prediction and the per-parameter change of the last two frames."""
@@ -1212,15 +1243,7 @@ class SilhouetteTracker:
         key = pose.params.tobytes()
         if self._part is not None and self._part[0] is masks and self._part[1] == key:
             return self._part[2]
-        if self._hull is None or self._hull[0] is not masks:
-            try:
-                points = self.visual_hull_points(masks)
-            except TrackingLost:  # an empty silhouette: nothing to check against
-                points = np.empty((0, 3))
-            up = rig_up(self.cameras, points.mean(axis=0)) if len(points) else None
-            # The masks held: their id is not reused while they are the key.
-            self._hull = (masks, points, np.array([0.0, 1.0, 0.0]) if up is None else up)
-        _, points, up = self._hull
+        points, up, _ = self._frame_hull(masks)
         if not len(points):
             return 0.0, np.empty((0, 3))
         vertices = self.model.posed_vertices(pose)
@@ -1231,6 +1254,29 @@ class SilhouetteTracker:
             opening_m=self.config.voxel_m)
         self._part = (masks, key, part)
         return part
+
+    def _frame_hull(self, masks: Sequence[np.ndarray]
+                    ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray] | None]:  # fmt: skip
+        """(points (N, 3), up (3,), band) of the frame of `masks`: its visual hull's surface
+        voxels (none when a silhouette is empty), the rig's up there, and per view the pixels
+        of the hull's lowest band alone (`lowest_band_pixels`, `TrackConfig.floor_band_m`;
+        None when off), which its XOR counts as missed whatever the pose. Carved once for the
+        masks held."""
+        if self._hull is None or self._hull[0] is not masks:
+            try:
+                points = self.visual_hull_points(masks)
+            except TrackingLost:  # an empty silhouette: nothing to check against
+                points = np.empty((0, 3))
+            up = rig_up(self.cameras, points.mean(axis=0)) if len(points) else None
+            up = np.array([0.0, 1.0, 0.0]) if up is None else up
+            band = None
+            if self.config.floor_band_m > 0 and len(points):
+                band = lowest_band_pixels(self.cameras, masks, points, up,
+                                          band_m=self.config.floor_band_m,
+                                          voxel_m=self.config.voxel_m)  # fmt: skip
+            # The masks held: their id is not reused while they are the key.
+            self._hull = (masks, points, up, band)
+        return self._hull[1], self._hull[2], self._hull[3]
 
     def _mend_unexplained(self, energy: SilhouetteEnergy, masks: Sequence[np.ndarray],
                           x: np.ndarray, frame: int = 0) -> tuple[np.ndarray, str]:  # fmt: skip

@@ -12,9 +12,11 @@ from tracking.rig.cameras import ring_cameras
 from tracking.silhouettes.hull import (
     HullCheckConfig,
     consistent_silhouettes,
+    floor_only,
     hull_diameter,
     hull_silhouettes,
     hull_surface_points,
+    lowest_band_pixels,
     rays_meeting_point,
     surface_voxels,
     visual_hull,
@@ -37,6 +39,68 @@ def test_the_visual_hull_of_a_ball_holds_the_ball():
     # What the tracker takes: the surface voxels' centres, made without the cube's.
     assert np.array_equal(hull_surface_points(CAMERAS, masks, size_m=1.2, voxel_m=0.03),
                           points[surface])
+
+
+def disc_masks(cameras: list, centre: np.ndarray, half_x: float, half_z: float) -> list[np.ndarray]:
+    """(H, W) bool truth per camera: the pixels whose ray meets a horizontal elliptic disc
+    (world centre, half axes along x and z, metres): a shadow on the floor."""
+    out = []
+    for cam in cameras:
+        rays = cam.pixel_rays_in_camera @ cam.R  # world directions
+        origin = cam.center_in_world
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (centre[1] - origin[1]) / rays[..., 1]
+        x = origin[0] + t * rays[..., 0] - centre[0]
+        z = origin[2] + t * rays[..., 2] - centre[2]
+        out.append((t > 0) & ((x / half_x) ** 2 + (z / half_z) ** 2 < 1))
+    return out
+
+
+SUITE_CAMERAS = ring_cameras(4, 4.0, 1.5, (0.0, 0.9, 0.0), 320, 240, 343.0)
+"""The motion suite's ring (`mocap synth`'s: 4 m, 1.5 m up) at half its image size."""
+
+
+@pytest.mark.parametrize("lift_m", [0.35, 0.1])
+def test_the_lowest_band_holds_a_floor_shadow_and_not_the_body_above(lift_m):
+    up = np.array([0.0, 1.0, 0.0])
+    # A ball (the body) `lift_m` above a shadow on the floor (y = 0), which every view keeps.
+    body = ball_masks(SUITE_CAMERAS, np.array([0.0, 0.2 + lift_m, 0.0]), 0.2)
+    shadow = disc_masks(SUITE_CAMERAS, np.array([0.1, 0.0, 0.05]), 0.2, 0.1)
+    masks = [b | s for b, s in zip(body, shadow, strict=True)]
+    points = hull_surface_points(SUITE_CAMERAS, masks, size_m=2.0, voxel_m=0.03)
+    band = lowest_band_pixels(SUITE_CAMERAS, masks, points, up, band_m=0.1, voxel_m=0.03)
+    for b, ball, disc in zip(band, body, shadow, strict=True):
+        assert not (b & ball).any() and not (b & ~disc).any()
+        # Nearly all of the shadow's own pixels (measured 0.74-0.96; the rest under the
+        # slab's upper voxels).
+        assert (b & disc & ~ball).sum() > 0.65 * (disc & ~ball).sum()
+    # The slab is under a gap: the start's fit leaves it out (`floor_only`), all of it.
+    below = floor_only(points, up, band_m=0.1, voxel_m=0.03)
+    assert below.any() and points[below, 1].max() < 0.05 < points[~below, 1].min()
+
+
+def test_the_lowest_band_of_a_body_on_the_floor_is_a_sliver_of_it():
+    up = np.array([0.0, 1.0, 0.0])
+    # A ball on the floor, no shadow: only a sliver of its bottom's pixels (measured 5.9%
+    # of its 870).
+    resting = ball_masks(SUITE_CAMERAS, np.array([0.0, 0.2, 0.0]), 0.2)
+    points = hull_surface_points(SUITE_CAMERAS, resting, size_m=2.0, voxel_m=0.03)
+    band = lowest_band_pixels(SUITE_CAMERAS, resting, points, up, band_m=0.1, voxel_m=0.03)
+    assert all(0 < b.sum() < 0.1 * m.sum() for b, m in zip(band, resting, strict=True))
+    assert not floor_only(points, up, band_m=0.1, voxel_m=0.03).any()  # no gap
+    # Standing on its shadow: the band holds the shadow and the ball's bottom, no gap.
+    shadow = disc_masks(SUITE_CAMERAS, np.array([0.1, 0.0, 0.05]), 0.2, 0.1)
+    masks = [b | d for b, d in zip(resting, shadow, strict=True)]
+    points = hull_surface_points(SUITE_CAMERAS, masks, size_m=2.0, voxel_m=0.03)
+    assert not floor_only(points, up, band_m=0.1, voxel_m=0.03).any()
+    band = lowest_band_pixels(SUITE_CAMERAS, masks, points, up, band_m=0.1, voxel_m=0.03)
+    assert all((b & s & ~m).sum() > 0.65 * (s & ~m).sum()
+               for b, s, m in zip(band, shadow, resting, strict=True))  # fmt: skip
+    # No band, no hull: no pixels.
+    assert not any(b.any() for b in lowest_band_pixels(SUITE_CAMERAS, masks, points, up,
+                                                       band_m=0.0, voxel_m=0.03))
+    assert not any(b.any() for b in lowest_band_pixels(SUITE_CAMERAS, masks, np.empty((0, 3)),
+                                                       up, band_m=0.1, voxel_m=0.03))
 
 
 def test_the_hull_silhouettes_bound_what_a_model_can_reach():

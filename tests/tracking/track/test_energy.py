@@ -181,6 +181,37 @@ def test_the_xor_counted_without_drawing_equals_the_drawn_xor(setup, renderer_na
         assert sum(drawn) > 0
 
 
+def test_missed_pixels_count_whatever_the_pose(setup):
+    """`SilhouetteEnergy`'s missed pixels (the tracker's floor band): out of every view's XOR,
+    and counted as missed whatever the pose, at every level: the energy is the one with them
+    unknown plus their count, so it ranks poses as that one does, with the scale of counting
+    them. A stage's counter (`XorCount` with a static part) counts them too."""
+    model, cameras, masks, renderer, truth = setup
+    rng = np.random.default_rng(5)
+    missed = [m & (rng.random(m.shape) > 0.7) for m in masks]
+    missed[2] = None
+    plain = SilhouetteEnergy(model, cameras, masks, renderer, levels=2)
+    known = [None if d is None else ~d for d in missed]
+    unknown = SilhouetteEnergy(model, cameras, masks, renderer, levels=2, known=known)
+    energy = SilhouetteEnergy(model, cameras, masks, renderer, levels=2, missed=missed)
+    assert energy.missed[0].tolist() == [0 if d is None else d.sum() for d in missed]
+    for level in (0, 1):
+        extra = energy.missed[level] * energy._pixel_area[level]
+        assert extra[0] > 0 and extra[2] == 0
+        for deg in (0, 30):
+            pose = _arm_raised_by(deg)
+            assert np.array_equal(energy.per_view(pose, level),
+                                  unknown.per_view(pose, level) + extra)
+    # At the pose that made the masks: the missed pixels alone, where plain counts 0.
+    assert plain(truth) == 0 and energy(truth) == sum(d.sum() for d in missed if d is not None)
+    moving = model.faces_moved_by(np.isin(np.arange(16), [8, 9, 10]))
+    static = [renderer.render(model.posed_vertices(truth), model.faces[~moving], c)
+              for c in cameras]  # fmt: skip
+    stage = XorCount(renderer, cameras, masks, energy.known[0], static, energy.missed[0])
+    vertices = model.posed_vertices(truth)
+    assert stage.counts(vertices, model.faces[moving]).sum() == energy(truth)
+
+
 def test_the_xor_count_of_views_of_different_sizes(setup):
     """Views of several sizes share one padded array in the compiled count (`ViewGains`): each
     view's count is still its own drawn XOR, a mesh partly outside the smaller views
