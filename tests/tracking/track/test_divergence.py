@@ -169,6 +169,37 @@ def test_a_track_back_under_the_bar_after_a_divergence_is_found_again():
     assert [r.status for r in unchecked][4:] == ["diverged", "tracked", "tracked"]
 
 
+def test_a_track_stuck_over_the_bar_after_a_divergence_is_searched_again():
+    """Frames 4-7 of a walk have a ghost in one view: frame 4's XOR jumps, and a start search
+    that finds nothing better leaves it "diverged", its XOR the reference, so frames 5 and 6,
+    as high, are tracked unflagged. Still over the bar of before the divergence
+    `_SEARCH_AGAIN_FRAMES` (3) frames on, the search runs again (here a stand-in that then
+    finds a pose under it): frame 7 is "recovered", not frame 8 when the ghost has gone."""
+    from tests.tracking.track.test_tracker import _masks, _walk
+    from tracking.track.tracker import _SEARCH_AGAIN_FRAMES
+
+    assert _SEARCH_AGAIN_FRAMES == 3
+    calls = []
+
+    def ghost(frame: int, pose: Pose) -> list[np.ndarray]:
+        masks = _masks(pose)
+        if 4 <= frame <= 7:
+            masks[0][100:140, 10:40] = True  # the ghost, left of the subject
+        return masks
+
+    def recover(tracker, energy, x, e):
+        calls.append(len(calls))
+        return (x, e, None) if len(calls) == 1 else (x, 0.0, "the stand-in")
+
+    results, _ = _track_shown(TrackConfig(body="superquadric"), _walk(10), recover, ghost)
+    statuses = [r.status for r in results]
+    assert statuses == ["init", "tracked", "tracked", "tracked", "diverged", "tracked",
+                        "tracked", "recovered", "tracked", "tracked"], (
+        statuses, [round(r.xor_fraction, 3) for r in results])
+    assert len(calls) == 2
+    assert "searched again 3 frames after the divergence at frame 4" in results[7].event
+
+
 def test_a_recovery_searches_the_hull_only_when_the_last_good_pose_is_not_enough():
     """The start search of a recovery tries the last good pose first (its limbs over their
     whole range), and the visual hull's search (a stand-in here that finds the pose shown,
