@@ -10,18 +10,26 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tests.helpers import ROOT, shared_dataset
 
 CLIPS = ("run", "wave", "climb_steps")  # climb_steps: Daz naming
 FRAMES = 4
-MAX_MPJPE_MM = 30.0
-"""Measured 16.7, 13.0 and 13.9 mm (session 20; run and wave 8.0 and 6.9 mm over their first
-30 frames at 640x480): with margin, and far under what a wrong limb or start costs (100 mm and
-more: the suite's kick and cartwheel)."""
+SIZE = "320x240"
+MAX_MPJPE_MM = 50.0
+"""The suite's targets (`tracking_suite.TARGET_CLIP_MM`, and `TARGET_MEAN_MM` over the three
+clips). Measured 16.7, 13.0 and 13.9 mm (session 20); in session 35, with the floor band,
+41.2, 13.2 and 14.0: the run's start mirrors the arms' swing (both wrists 170-190 mm off,
+10.9 mm with the offsets out), and at this size the mirrored pose has the lower XOR, with
+the band or without it (frame 0: 1587 against 1640 px, 1546 against 1591). Four frames at
+320x240 are a start and a one-frame shape pass, chancy for any clip: all 15 clips so, the
+band against none in the same run, 45.0 against 47.7 mm mean (better on 9 clips, worse on
+5: the run 41.2 against 16.7; the squat 345 and 341, a wrong start both ways; session 35)."""
 MAX_OFFSET_FREE_MM = 20.0
-"""Measured 10.1, 7.3 and 9.8 mm with each joint's mean offset removed."""
+"""Measured 10.1, 7.3 and 9.8 mm with each joint's mean offset removed (session 20); 10.9,
+7.7 and 10.1 (session 35)."""
 
 
 @pytest.mark.shared_data
@@ -29,15 +37,19 @@ def test_suite_subset_tracks_three_clips(tmp_path: Path, monkeypatch: pytest.Mon
                                          ) -> None:  # fmt: skip
     clip_dir = shared_dataset("mocap_bvh")
     monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
-    from tracking_suite import run_clip, start_frames, unrecovered
+    from tracking_suite import TARGET_CLIP_MM, TARGET_MEAN_MM, run_clip, start_frames, unrecovered
+
+    assert MAX_MPJPE_MM == TARGET_CLIP_MM
 
     starts = start_frames([], list(CLIPS))  # synth's: climb_steps from clip frame 5
+    errors = []
     for clip in CLIPS:
-        case = run_clip(tmp_path, clip, FRAMES, starts[clip], ["current"], "320x240",
+        case = run_clip(tmp_path, clip, FRAMES, starts[clip], ["current"], SIZE,
                         clip_dir)["current"]  # fmt: skip
         assert sorted(case.status) == list(range(FRAMES)), clip
         assert not case.lost and not unrecovered(case.status), (clip, case.status)
         assert case.mpjpe_mm < MAX_MPJPE_MM, (clip, case.mpjpe_mm, case.per_joint)
+        errors.append(case.mpjpe_mm)
         assert case.offset_free_mm < MAX_OFFSET_FREE_MM, (clip, case.offset_free_mm)
         # Where the time went (run.json): the start and shape pass, once, then each frame,
         # which together are most of the clip's time.
@@ -45,3 +57,4 @@ def test_suite_subset_tracks_three_clips(tmp_path: Path, monkeypatch: pytest.Mon
         assert 0 < case.shape_pass_s < seconds, (clip, case.shape_pass_s, seconds)
         assert case.shape_pass_s + FRAMES / case.tracking_fps < seconds, clip
         assert case.shape_pass_s + FRAMES / case.tracking_fps > 0.5 * seconds, clip
+    assert np.mean(errors) <= TARGET_MEAN_MM, errors
