@@ -407,8 +407,12 @@ def test_pixels_of_unknown_background_are_left_out():
         return masks
 
     errors, xor = {}, {}
+    # Without the floor band, whose pixels (here the soles', 3-5 points of the silhouette at
+    # 320x240) count as missed whatever the pose: the XOR told is then that of clean
+    # silhouettes alone (0.043-0.061 with the band).
+    config = dataclasses.replace(SUPERQUADRIC, floor_band_m=0.0)
     for told in (True, False):
-        tracker = SilhouetteTracker(CAMERAS, SUPERQUADRIC, shape=SHAPE,
+        tracker = SilhouetteTracker(CAMERAS, config, shape=SHAPE,
                                     unknown=[None, band, None, None] if told else None)
         errors[told], xor[told] = [], []
         for frame, pose in enumerate(truth):
@@ -418,7 +422,7 @@ def test_pixels_of_unknown_background_are_left_out():
             errors[told].append(_mpjpe_mm(result.pose, SHAPE, pose))
             xor[told].append(result.xor_fraction)
     assert max(errors[True]) < 15, errors
-    assert max(xor[True]) < 0.06 < min(xor[False][1:]), xor
+    assert max(xor[True]) < 0.06 < min(xor[False][1:]), xor  # measured 0.000-0.014
     # The visual hull is carved by what the views can tell: the torso is in it.
     tracker = SilhouetteTracker(CAMERAS, SUPERQUADRIC, shape=SHAPE,
                                 unknown=[None, band, None, None])
