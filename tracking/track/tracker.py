@@ -657,7 +657,7 @@ class SilhouetteTracker:
         self._refiner: tuple[SilhouetteEnergy, int, ContourRefiner] | None = None
         self._part: tuple[object, bytes, tuple[float, np.ndarray]] | None = None  # its last
         # (masks, points, up, band): the frame's hull (`_frame_hull`), for its last masks
-        self._hull: tuple[object, np.ndarray, np.ndarray, list | None] | None = None
+        self._hull: tuple[object, np.ndarray, np.ndarray | None, list | None] | None = None
         self._mend_failed_at: int | None = None  # the frame of the last mend that found nothing
         self.evaluations = 0
         # How `calibrate_shape` found the pose it returns: the first tracked frame starts from
@@ -724,10 +724,11 @@ class SilhouetteTracker:
         from tracking.fit.body_fit import FitConfig, fit_body
 
         self._one_subject(masks)  # a fit to two subjects' hull would merge them
-        points = self.visual_hull_points(masks)
+        points, up, _ = self._frame_hull(masks)  # carved once with the frame's energy's
+        if not len(points):
+            self.visual_hull_points(masks)  # an empty silhouette: its one-line reason
         if len(points) < 100:
             raise TrackingLost("the silhouettes do not intersect in a visual hull")
-        up = rig_up(self.cameras, points.mean(axis=0))
         if up is not None and self.config.floor_band_m > 0:
             # A floor shadow's slab is no body to fit, stand on, or reach with a foot.
             points = points[~floor_only(points, up, band_m=self.config.floor_band_m,
@@ -1246,6 +1247,7 @@ class SilhouetteTracker:
         points, up, _ = self._frame_hull(masks)
         if not len(points):
             return 0.0, np.empty((0, 3))
+        up = np.array([0.0, 1.0, 0.0]) if up is None else up
         vertices = self.model.posed_vertices(pose)
         model_masks = render_views(self.renderer, vertices, self.model.faces, self.cameras)
         part = unexplained_hull_part(
@@ -1256,9 +1258,10 @@ class SilhouetteTracker:
         return part
 
     def _frame_hull(self, masks: Sequence[np.ndarray]
-                    ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray] | None]:  # fmt: skip
+                    ) -> tuple[np.ndarray, np.ndarray | None, list[np.ndarray] | None]:  # fmt: skip
         """(points (N, 3), up (3,), band) of the frame of `masks`: its visual hull's surface
-        voxels (none when a silhouette is empty), the rig's up there, and per view the pixels
+        voxels (none when a silhouette is empty), the rig's up there (`rig_up`; None when the
+        rig cannot tell, and the band then measured along +Y), and per view the pixels
         of the hull's lowest band alone (`lowest_band_pixels`, `TrackConfig.floor_band_m`;
         None when off), which its XOR counts as missed whatever the pose. Carved once for the
         masks held."""
@@ -1268,10 +1271,10 @@ class SilhouetteTracker:
             except TrackingLost:  # an empty silhouette: nothing to check against
                 points = np.empty((0, 3))
             up = rig_up(self.cameras, points.mean(axis=0)) if len(points) else None
-            up = np.array([0.0, 1.0, 0.0]) if up is None else up
             band = None
             if self.config.floor_band_m > 0 and len(points):
-                band = lowest_band_pixels(self.cameras, masks, points, up,
+                band = lowest_band_pixels(self.cameras, masks, points,
+                                          np.array([0.0, 1.0, 0.0]) if up is None else up,
                                           band_m=self.config.floor_band_m,
                                           voxel_m=self.config.voxel_m)  # fmt: skip
             # The masks held: their id is not reused while they are the key.
@@ -1449,7 +1452,7 @@ class SilhouetteTracker:
                 # for: the search again, every few frames, until the track is back.
                 since, bar = self.watch.diverged
                 y, e_y, found = self._recover(masks, energy, x, e,
-                                              enough=lambda e_y: e_y <= bar * area)
+                                              enough=lambda value: value <= bar * area)
                 if found is not None:
                     x, e = y, e_y
                     if e <= bar * area:
