@@ -926,8 +926,9 @@ class SilhouetteTracker:
                         progress: Callable[[], object] | None = None) -> Pose:
         """The subject's shape from the first frames of a sequence (masks per frame), before
         tracking it: the first frame is initialised (with its own shape estimate), the others
-        are tracked, and every `shape_stride`-th tracked frame's pose is refined together with
-        the segment lengths, which the silhouettes of several poses tell apart better than one.
+        up to the last `shape_stride`-th are tracked, and every `shape_stride`-th one's pose is
+        refined together with the segment lengths, which the silhouettes of several poses
+        tell apart better than one.
         Returns the first frame's pose with that shape; the tracker then starts afresh from it
         and its event says how it was found (not "the given pose")."""
         if self.shape is not None:
@@ -939,8 +940,12 @@ class SilhouetteTracker:
                          progress: Callable[[], object] | None) -> Pose:  # fmt: skip
         """`calibrate_shape` (the start's parameters held)."""
         cfg = self.config
+        stride = max(cfg.shape_stride, 1)
         picked: list[tuple[Sequence[np.ndarray], Pose]] = []
-        for index, masks in enumerate(sequence):
+        # The frames after the last one refined tell the shape nothing: not tracked (3 of the
+        # default 24, about 0.8 s of a start).
+        needed = sequence[:(len(sequence) - 1) // stride * stride + 1]
+        for index, masks in enumerate(needed):
             result = self.track(index, masks)
             if index == 0:
                 self._start_event = f"{result.event}; segment lengths from the first frames"
@@ -950,12 +955,16 @@ class SilhouetteTracker:
                 if index == 0:
                     raise TrackingLost(result.event.removeprefix("lost: "))
                 break
-            if index % max(cfg.shape_stride, 1) == 0:
+            if index % stride == 0:
                 picked.append((masks, result.pose))
+        else:
+            for _ in sequence[len(needed):]:
+                if progress is not None:
+                    progress()
         # Which frames of `sequence` (indices) the shape came from: fewer than a full pass's
         # when the sequence is short or the pass lost the subject (`mocap track` warns).
-        self.shape_frames_used = [i for i in range(len(sequence))
-                                  if i % max(cfg.shape_stride, 1) == 0][:len(picked)]
+        self.shape_frames_used = [i for i in range(len(sequence)) if i % stride == 0
+                                  ][:len(picked)]  # fmt: skip
         poses = self._refine_shape([m for m, _ in picked], [p for _, p in picked])
         # Tracking starts afresh from the first frame: nothing of the pass is a reference.
         self.history, self._last_good, self._lost_since = [], None, None

@@ -27,7 +27,13 @@ from tracking.body.motion import is_body_skeleton, poses_from_motion
 from tracking.rig.cameras import read_cameras, ring_cameras
 from tracking.silhouettes.hull import hull_diameter
 from tracking.track.render import CpuRasterRenderer
-from tracking.track.tracker import SilhouetteTracker, TrackConfig, start_height, upright_starts
+from tracking.track.tracker import (
+    FrameResult,
+    SilhouetteTracker,
+    TrackConfig,
+    start_height,
+    upright_starts,
+)
 
 SHAPE = BodyShape.default(1.75)
 MODEL = BodyModel(SHAPE)
@@ -374,6 +380,33 @@ def test_cli_track_from_a_given_pose_in_another_frame(tmp_path):
     assert np.ptp(vertices[:, 2]) > 1.3 > np.ptp(vertices[:, 1])  # standing along Z
     joints = np.array([[float(r[a]) for a in "xyz"] for r in rows if r["frame"] == "1"])
     assert np.linalg.norm(vertices.mean(axis=0) - joints.mean(axis=0)) < 0.15
+
+
+def test_the_shape_pass_tracks_no_frame_after_its_last_refined_one(monkeypatch):
+    """`calibrate_shape` over 10 frames with a stride of 4 refines the shape with frames 0, 4
+    and 8: it tracks frames 0-8 and not 9, which tell the shape nothing, and its progress
+    still counts all 10. (Its tracking, refinements and energy are stand-ins here: what is
+    checked is which frames it tracks and refines.)"""
+    tracker = SilhouetteTracker(CAMERAS, dataclasses.replace(SUPERQUADRIC, shape_stride=4))
+    tracked, refined, progress = [], [], []
+
+    def track(frame, masks, init=None):
+        tracked.append(frame)
+        return FrameResult(frame, Pose(np.full(N_POSE_PARAMS, float(frame))), 0.0, 1.0, 0, 0.0,
+                           "init" if frame == 0 else "", "init" if frame == 0 else "tracked")
+
+    def refine_shape(sequence, poses):
+        refined.extend(sequence)
+        return poses
+
+    monkeypatch.setattr(tracker, "track", track)
+    monkeypatch.setattr(tracker, "_refine_shape", refine_shape)
+    monkeypatch.setattr(tracker, "_energy", lambda masks: None)
+    monkeypatch.setattr(tracker, "_refine_all", lambda energy, x, init=False: x)
+    first = tracker.calibrate_shape([[i] for i in range(10)], progress=lambda: progress.append(1))
+    assert tracked == list(range(9)) and len(progress) == 10
+    assert refined == [[0], [4], [8]] and tracker.shape_frames_used == [0, 4, 8]
+    assert (first.params == 0).all()
 
 
 def test_cli_track_needs_a_video_workspace(tmp_path):
