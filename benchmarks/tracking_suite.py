@@ -317,6 +317,15 @@ Session 36, speed, not met on the cartwheel: two ways measured and dropped, one 
   unrecovered at the clip's end. None above 50 mm; mean 18.6. A clip's figure and the
   targets' pass or fail on the hard clips are one draw of a chaotic track: the cartwheel's
   speed fails on seed 0 alone, its accuracy is 21-41 mm, bend_pickup's 10-42.
+- bend_pickup@2 is confidently wrong for 27 frames: the start's hull fit made the subject
+  1.613 m (seeds 0 and 1: 1.549), frame 0's XOR 0.168 and frames 0-26 50-68 mm off, all
+  "tracked"; the shape pass left 1.611. The whole start search with the model at 1.55 m
+  (`start_height` forced) finds an upright start at XOR 0.104 and 11 mm, and its shape pass
+  keeps 1.549; from 1.68 the pass pulls the height to 1.651 only. Refining the winning pose
+  again at 1.613 m times 0.96 and 1.04 does not find it (XOR 10193 and 10111 px against
+  9814: the pose stays in its basin); each height would need its own start search (~3.3 s).
+  A narrower floor band does not help (0.05 m: 1.687 m; none: 1.715, the shadow's slab kept).
+  Not landed.
 
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
