@@ -138,6 +138,25 @@ def test_automatic_start_picks_the_right_legs_and_the_shape():
         assert np.linalg.norm(got[name] - truth[name]) < 0.07, name
 
 
+def test_a_winning_start_with_the_legs_swapped_is_put_right():
+    """`SilhouetteTracker._winner_swapped`: a start that won with the legs swapped loses to its
+    leg swap refined by the whole hierarchy, and the message says so; a right start stays as
+    it is."""
+    shape = BodyShape.default(1.75)
+    masks = _masks(BodyModel(shape), STRIDE)
+    tracker = SilhouetteTracker(CAMERAS, SUPERQUADRIC, shape=shape)
+    energy = tracker._energy(masks)
+    tracker._prepare(energy, init=True)
+    level = tracker.config.final_level
+    swapped = swap_sides(STRIDE.params, "leg")
+    assert _mpjpe_mm(Pose(swapped), shape, STRIDE, shape) > 60
+    x, note = tracker._winner_swapped(energy, swapped, tracker._objective(energy, swapped, level))
+    assert note == ", its legs swapped" and _mpjpe_mm(Pose(x), shape, STRIDE, shape) < 10
+    right = STRIDE.params.copy()
+    y, note = tracker._winner_swapped(energy, right, tracker._objective(energy, right, level))
+    assert note == "" and y is right
+
+
 def test_a_start_with_the_legs_swapped_is_put_right():
     shape = BodyShape.default(1.75)
     masks = _masks(BodyModel(shape), STRIDE)
