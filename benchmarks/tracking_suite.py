@@ -326,6 +326,26 @@ Session 36, speed, not met on the cartwheel: two ways measured and dropped, one 
   9814: the pose stays in its basin); each height would need its own start search (~3.3 s).
   A narrower floor band does not help (0.05 m: 1.687 m; none: 1.715, the shadow's slab kept).
   Not landed.
+- run@2 was tracked with its legs swapped from the start to the end: 130.8 mm, 38 frames over
+  100 mm, 31 of them unflagged (an upright start won with the legs the wrong way; only the
+  fit's start had its swaps tried). The winner's own swaps of the legs, the arms and both are
+  now refined by the whole hierarchy and compete with it (`_winner_swapped`; its leg swap
+  scores 2112 px against 3560 at frame 0, 16 mm against 103). All 15 clips, 60 frames,
+  ``--seeds 0 1 2`` (45 tracks; the first ~20 ran beside ``make test`` and the Pose2Sim demo,
+  so their frames/s are low), before -> after, mm per seed 0 / 1 / 2:
+  walk 7.8/11.1/8.0 -> 8.0/8.5/9.5, run 14.3/13.9/130.8 -> 14.7/11.4/9.4, jump 13.1/11.6/11.1
+  -> 13.7/10.4/12.4, cartwheel 21.0/41.4/22.0 -> 39.1/**50.4**/21.7, dance 8.8/9.5/9.1 ->
+  8.8/10.2/9.3, boxing 7.7/6.5/10.3 -> 7.0/7.1/6.1, bend_pickup 10.6/9.6/42.1 ->
+  16.0/29.8/37.5, wave unchanged (5.8/5.3/6.9), squat 8.9/20.5/6.9 -> 6.8/16.4/12.2,
+  sit_stand 5.5/6.2/5.2 -> 5.4/6.0/5.1, climb_steps 8.4/15.1/7.4 -> 8.8/12.7/7.9, kick
+  4.7/5.8/4.5 -> 6.7/4.3/4.1, arms_overhead 8.3/8.1/6.8 -> 7.4/8.1/7.2, turn_pirouette
+  23.6/12.7/12.9 -> 21.3/13.0/19.0, start_walk_stop 11.6/12.2/9.3 -> 15.0/12.2/9.4. Mean over
+  the 45: 14.3 -> **12.6 mm**; frames over 100 mm unflagged 31 -> 4 (cartwheel@1). Targets
+  missed, before: run@2 above 50 mm, turn_pirouette@1's frame 57 unrecovered at the clip's
+  end, the cartwheel's speed at seed 0; after: cartwheel@1 above 50 mm (50.4; frame 9 lost,
+  recovered at 10), bend_pickup@1's frame 29 diverged, recovered at 40, turn_pirouette@1's
+  and @2's frame 57 at the clip's end. Pose2Sim demo: 100/100 frames, median IoU 0.827 ->
+  **0.831** (its fit's arms swapped won at frame 0).
 
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
