@@ -821,9 +821,7 @@ class SilhouetteTracker:
         was tracked so for the whole clip, 130.8 mm, 31 frames over 100 mm unflagged; its leg
         swap refined scores 2112 px and 16 mm (session 36). The fit's start had its swaps
         (`_best_hypothesis`, on the outlines only), the others none."""
-        swaps = [swap_sides(x, "leg"), swap_sides(x, "arm"),
-                 swap_sides(swap_sides(x, "leg"), "arm")]
-        again = self._refine_starts(energy, [Pose(y) for y in swaps])
+        again = self._refine_starts(energy, [Pose(y) for y in left_right_swaps(x)])
         scores = [self._objective(energy, y, self.config.final_level) for y in again]
         best = int(np.argmin(scores))
         if scores[best] >= score:
@@ -891,8 +889,7 @@ class SilhouetteTracker:
         refiner = ContourRefiner(energy.model, energy.cameras[level], energy.masks[level],
                                  energy.renderer, ContourConfig(iterations=20),
                                  known=energy.known[level])  # fmt: skip
-        starts = [x, swap_sides(x, "leg"), swap_sides(x, "arm"),
-                  swap_sides(swap_sides(x, "leg"), "arm")]  # fmt: skip
+        starts = [x, *left_right_swaps(x)]
         free = self._free()
         # Independent: side by side (`TrackConfig.workers`), the same results.
         refined = self._side_by_side(lambda i: refiner.refine(
@@ -1680,6 +1677,12 @@ def upright_starts(fit: Pose, up: np.ndarray | None, headings: int,
 def _known_area(masks: Sequence[np.ndarray], known: Sequence[np.ndarray | None]) -> float:
     """Silhouette pixels over all views, counting only the known ones."""
     return float(sum(np.count_nonzero(counted(m, k)) for m, k in zip(masks, known, strict=True)))
+
+
+def left_right_swaps(x: np.ndarray) -> list[np.ndarray]:
+    """The pose `x` with its legs swapped, its arms swapped, and both (`swap_sides`): what
+    the silhouettes can hardly tell from it."""
+    return [swap_sides(x, "leg"), swap_sides(x, "arm"), swap_sides(swap_sides(x, "leg"), "arm")]
 
 
 def swap_sides(x: np.ndarray, limb: str) -> np.ndarray:
