@@ -462,6 +462,12 @@ def unflagged_off(case: Case) -> list[int]:
             case.unexplained and case.status.get(f) in ("tracked", "init")]  # fmt: skip
 
 
+def seeded(clip: str, seed: int) -> str:
+    """A clip's name in the suite with its noise drawn from ``seed``: ``clip`` for seed 0 (the
+    suite's usual data), else ``clip@seed``."""
+    return clip if seed == 0 else f"{clip}@{seed}"
+
+
 def run_clip(
     root: Path,
     clip: str,
@@ -477,7 +483,7 @@ def run_clip(
     with ``seed``) into ``root/clip`` (``root/clip@seed`` for a seed other than 0) and track
     them with each of ``trackers``, ``repeats`` times each (`best_of`); their figures by
     tracker."""
-    name = clip if seed == 0 else f"{clip}@{seed}"
+    name = seeded(clip, seed)
     ws = root / name
     flags = ["--frames", str(frames), "--size", size, "--overwrite", "--seed", str(seed)]
     synth_subject(
@@ -550,7 +556,7 @@ def main() -> None:
                 for name, case in run_clip(args.keep or Path(tmp), clip, args.frames,
                                            starts[clip], args.trackers, args.size,
                                            repeats=args.repeats, seed=seed).items():
-                    cases[case.label.split(" / ")[0], name] = case
+                    cases[seeded(clip, seed), name] = case
     fastest = f"; frames/s the fastest of {args.repeats} runs" if args.repeats > 1 else ""
     print(f"\n{args.frames} frames per clip, {args.size}{fastest}\n"
           f"{'clip / tracker':<30}{'MPJPE':>8}"
@@ -596,7 +602,7 @@ def main() -> None:
             )
         if len(args.seeds) > 1:
             for clip in args.clips:
-                seeds = [c for key, c in mine.items() if key.split("@")[0] == clip]
+                seeds = [mine[seeded(clip, seed)] for seed in args.seeds]
                 mm, fps = [c.mpjpe_mm for c in seeds], [c.fps for c in seeds]
                 print(f"  {clip} over {len(seeds)} seeds: MPJPE {min(mm):.1f}-{max(mm):.1f} mm "
                       f"(mean {np.mean(mm):.1f}), {min(fps):.2f}-{max(fps):.2f} frames/s")

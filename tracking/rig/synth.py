@@ -269,7 +269,8 @@ def _check_config(config: SynthConfig) -> None:
         raise UserError("--fps and --metres-per-unit must be positive")
     negative = [f.name for f in dataclasses.fields(config)
                 if f.name in ("jitter_px", "jitter_scale_px", "holes", "hole_radius_m",
-                              "shadow_length_m", "shadow_width_m", "shadow_offset_m")
+                              "shadow_length_m", "shadow_width_m", "shadow_offset_m",
+                              "seed")
                 and not getattr(config, f.name) >= 0]  # fmt: skip
     if negative:
         raise UserError(f"--{negative[0].replace('_', '-')} must be 0 or more")

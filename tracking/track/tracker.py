@@ -977,10 +977,9 @@ class SilhouetteTracker:
                 break
             if index % stride == 0:
                 picked.append((masks, result.pose))
-        else:
-            for _ in sequence[len(needed):]:
-                if progress is not None:
-                    progress()
+        else:  # the frames not needed are done too
+            for _ in sequence[len(needed):] if progress is not None else ():
+                progress()
         # Which frames of `sequence` (indices) the shape came from: fewer than a full pass's
         # when the sequence is short or the pass lost the subject (`mocap track` warns).
         self.shape_frames_used = [i for i in range(len(sequence)) if i % stride == 0

@@ -302,6 +302,7 @@ def test_bad_input_is_one_line(body_bvh, tmp_path):
     _assert_one_line_error(run_cli("synth", ws, "--bvh", path, "--size", "640by480"), "--size")
     _assert_one_line_error(run_cli("synth", ws, "--bvh", path, "--frames", "7"), "--frames 7")
     _assert_one_line_error(run_cli("synth", ws, "--bvh", path, "--frames", "0"), "--frames 0")
+    _assert_one_line_error(run_cli("synth", ws, "--bvh", path, "--seed", "-1"), "--seed")
     _assert_one_line_error(run_cli("synth", ws, "--bvh", path, "--radius", "1"),
                            "leaves the view")
     assert not ws.exists() or not any(ws.iterdir())
