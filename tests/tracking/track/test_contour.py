@@ -157,6 +157,31 @@ def test_a_winning_start_with_the_legs_swapped_is_put_right():
     assert note == "" and y is right
 
 
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_start_that_sets_the_shape_keeps_the_swap_of_lowest_xor_with_its_proportions(workers):
+    """`SilhouetteTracker._shaped_winner`: the winning start and its left/right swaps are each
+    given the subject's proportions (here thighs 7% longer and a head 15% shorter than the
+    model's); the lowest XOR after that wins and sets the model, in forked workers as in
+    turn. A start with its legs swapped is put right, its thighs lengthened."""
+    base = BodyShape.default(1.75)
+    scales = np.ones(len(SHAPE_GROUPS))
+    scales[SHAPE_GROUPS.index(("thigh",))] = 1.07
+    scales[SHAPE_GROUPS.index(("neck_to_head_top",))] = 0.85
+    truth_shape = scaled_shape(base, scales)
+    masks = _masks(BodyModel(truth_shape), STRIDE)
+    tracker = SilhouetteTracker(CAMERAS, TrackConfig(body="superquadric", workers=workers),
+                                shape=base)  # fmt: skip
+    energy = tracker._energy(masks)
+    tracker._prepare(energy, init=True)
+    swapped = swap_sides(STRIDE.params, "leg")
+    assert _mpjpe_mm(Pose(swapped), base, STRIDE, truth_shape) > 60
+    x, note = tracker._shaped_winner(masks, energy, swapped)
+    assert note == ", its legs swapped", note
+    assert _mpjpe_mm(Pose(x), tracker.shape, STRIDE, truth_shape) < 15
+    assert tracker.shape.thigh / truth_shape.thigh == pytest.approx(1, abs=0.04)
+    assert tracker.shape.thigh > 1.02 * base.thigh
+
+
 def test_a_start_with_the_legs_swapped_is_put_right():
     shape = BodyShape.default(1.75)
     masks = _masks(BodyModel(shape), STRIDE)
