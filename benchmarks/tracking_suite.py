@@ -383,6 +383,16 @@ bend_pickup 2.01 / 2.16 against 1.25 / 1.21 (now 10.6 mm, not 16.0, with a diver
 frame 32 searched and recovered at 37). Every clip at 1 frame/s or more but the suite's first
 (above). Pose2Sim demo (``tracking_pose2sim.py --trackers mpfb``): 100/100 frames, median IoU
 0.831 -> **0.832**.
+- Measured and dropped: the divergence watch's slide bar over the lowest median since the
+  last start, not the recent one (`XorWatch`; kept on the branch ``dropped/floor-watch``). The
+  cartwheel's seeds 0 and 1 slid from 20% to 33% XOR over frames 36-59, a point or two a
+  frame, each under 1.3 times the recent median, as the track drifted from 36 to 107 mm
+  (frames 44-49 50-63 mm with no flag at all; 50-59 flagged unexplained). Replayed on the 45
+  tracks' XORs it flagged 16 frames, 5 of them on tracks 8-17 mm off. Tracked, 45 tracks:
+  cartwheel 39.1/43.6/21.7 -> 24.6/21.7/28.4 mm, mean 10.9 -> 10.3, but bend_pickup's
+  divergences (frames 29-34) now unrecovered within 5 frames on all 3 seeds, 11.3/10.3/22.3
+  mm, and 5 clips under 1 frame/s (bend_pickup 0.61-0.88, cartwheel@1 and @2 0.68-0.78): each
+  slide's divergence is searched again every 3 frames while over the lower bar.
 
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
