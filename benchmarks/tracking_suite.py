@@ -392,7 +392,7 @@ frame 32 searched and recovered at 37). Every clip at 1 frame/s or more but the 
   last start, not the recent one (`XorWatch`; kept on the branch ``dropped/floor-watch``). The
   cartwheel's seeds 0 and 1 slid from 20% to 33% XOR over frames 36-59, a point or two a
   frame, each under 1.3 times the recent median, as the track drifted from 36 to 107 mm
-  (frames 44-49 50-63 mm with no flag at all; 50-59 flagged unexplained). Replayed on the 45
+  (frames 44-49 46-63 mm with no flag at all; 50-59 flagged unexplained). Replayed on the 45
   tracks' XORs it flagged 16 frames, 5 of them on tracks 8-17 mm off. Tracked, 45 tracks:
   cartwheel 39.1/43.6/21.7 -> 24.6/21.7/28.4 mm, mean 10.9 -> 10.3, but bend_pickup's
   divergences (frames 29-34) now unrecovered within 5 frames on all 3 seeds, 11.3/10.3/22.3
