@@ -809,25 +809,29 @@ class SilhouetteTracker:
 
     def _side_by_side(self, job: Callable[[int], Any], count: int) -> list[Any]:
         """``[job(0), ..., job(count - 1)]`` of independent jobs, in `TrackConfig.workers`
-        forked processes (`fork_map`): the same results as one by one."""
-        return fork_map(job, count, workers_for(self.config.workers))
+        forked processes (`fork_map`): the same results as one by one. The energy evaluations
+        the jobs make count in `evaluations` wherever they ran (a child's count is lost
+        with it, so each job returns its own)."""
+        def counted(index: int) -> tuple[Any, int]:
+            before = self.evaluations
+            out = job(index)
+            made, self.evaluations = self.evaluations - before, before
+            return out, made
+
+        results = fork_map(counted, count, workers_for(self.config.workers))
+        self.evaluations += sum(made for _, made in results)
+        return [out for out, _ in results]
 
     def _refine_starts(self, energy: SilhouetteEnergy, starts: Sequence[Pose]) -> list[np.ndarray]:
         """Each of `starts` refined by the whole hierarchy, the limbs' grids over their whole
         range (`_refine_all` with init): independent of one another, so side by side in
         `TrackConfig.workers` processes (`fork_map`), with the same results as one by one."""
-        def refine(index: int) -> tuple[np.ndarray, int]:
-            before = self.evaluations
-            x = self._refine_all(energy, starts[index].params.copy(), init=True)
-            count, self.evaluations = self.evaluations - before, before
-            return x, count
-
-        results = self._side_by_side(refine, len(starts))
-        self.evaluations += sum(count for _, count in results)
+        refined = self._side_by_side(lambda index: self._refine_all(
+            energy, starts[index].params.copy(), init=True), len(starts))
         # What `_refine_all` leaves behind (the start's priors), set here too when the
         # refinements ran in other processes.
         self._prepare(energy, init=True)
-        return [x for x, _ in results]
+        return refined
 
     def _shaped_winner(self, masks: Sequence[np.ndarray], energy: SilhouetteEnergy,
                        x: np.ndarray) -> tuple[np.ndarray, str]:  # fmt: skip
@@ -841,24 +845,25 @@ class SilhouetteTracker:
         from seed 1 won an upright start's swap of the legs and arms at XOR 0.294 of the
         silhouette area against the start's own 0.316 (173 mm off at frame 0, against 92);
         with their proportions, 0.243 (163 mm) against 0.165 (52 mm) (session 37)."""
-        poses = [x, *self._refine_starts(energy, [Pose(y) for y in left_right_swaps(x)])]
+        poses = [x, *self._refined_swaps(energy, x)]
         base = self.model
 
-        def shaped(index: int) -> tuple[np.ndarray, TrackedModel, float, int]:
-            before, self.model = self.evaluations, base
+        def shaped(index: int) -> tuple[np.ndarray, TrackedModel, float]:
+            self.model = base
             y = self._refine_shape([masks], [Pose(poses[index])])[0].params
             own = self._energy(masks)
             y = self._refine_all(own, y, init=True)
-            score = self._objective(own, y, self.config.final_level)
-            count, self.evaluations = self.evaluations - before, before
-            return y, self.model, score, count
+            return y, self.model, self._objective(own, y, self.config.final_level)
 
         results = self._side_by_side(shaped, len(poses))
-        self.evaluations += sum(r[3] for r in results)
         best = int(np.argmin([r[2] for r in results]))
-        y, self.model, _, _ = results[best]
+        y, self.model, _ = results[best]
         self._prepare(energy, init=True)  # as `_refine_starts` leaves it
         return y, "" if best == 0 else f", its {SWAPPED[best - 1]} swapped"
+
+    def _refined_swaps(self, energy: SilhouetteEnergy, x: np.ndarray) -> list[np.ndarray]:
+        """`left_right_swaps` of `x`, each refined by the whole hierarchy (`_refine_starts`)."""
+        return self._refine_starts(energy, [Pose(y) for y in left_right_swaps(x)])
 
     def _winner_swapped(self, energy: SilhouetteEnergy, x: np.ndarray, score: float
                         ) -> tuple[np.ndarray, str]:  # fmt: skip
@@ -873,7 +878,7 @@ class SilhouetteTracker:
         was tracked so for the whole clip, 130.8 mm, 31 frames over 100 mm unflagged; its leg
         swap refined scores 2112 px and 16 mm (session 36). The fit's start had its swaps
         (`_best_hypothesis`, on the outlines only), the others none."""
-        again = self._refine_starts(energy, [Pose(y) for y in left_right_swaps(x)])
+        again = self._refined_swaps(energy, x)
         scores = [self._objective(energy, y, self.config.final_level) for y in again]
         best = int(np.argmin(scores))
         if scores[best] >= score:
@@ -1395,10 +1400,9 @@ class SilhouetteTracker:
         start_xor = best_xor
         limbs = nearest[:2]
 
-        def search(index: int) -> tuple[np.ndarray, float, float, int]:
-            """The pose with limbs[index] searched, its XOR, its hull's unexplained share, and
-            the energy evaluations it took."""
-            before = self.evaluations
+        def search(index: int) -> tuple[np.ndarray, float, float]:
+            """The pose with limbs[index] searched, its XOR and its hull's unexplained
+            share."""
             weight = prior[1].copy()
             weight[_LIMBS[limbs[index]][0][2]] = 0.0  # the limb's axial twist
             self._prior = (prior[0], weight)
@@ -1407,14 +1411,12 @@ class SilhouetteTracker:
                                cfg.search_level, wide=True, cfg=wide)  # fmt: skip
             finally:
                 self._prior = prior
-            count, self.evaluations = self.evaluations - before, before
             return (y, energy(Pose(y), cfg.final_level),
-                    self.unexplained_part(masks, Pose(y))[0], count)  # fmt: skip
+                    self.unexplained_part(masks, Pose(y))[0])  # fmt: skip
 
         # Both limbs from x, independent of each other: side by side, the same results.
-        for limb, (y, xor, left_out, count) in zip(
+        for limb, (y, xor, left_out) in zip(
                 limbs, self._side_by_side(search, len(limbs)), strict=True):
-            self.evaluations += count
             if xor < best_xor and left_out < share:
                 best, best_xor, found = y, xor, limb
         if not found:
