@@ -821,8 +821,10 @@ class BodyModel:
         local = parent_from_node_transforms(pose, self.shape)
         return local[:, :3, :3], local[0, :3, 3].copy()
 
-    def posed_vertices(self, pose: Pose) -> np.ndarray:
-        """(V, 3) world vertex positions in `pose`."""
+    def posed_vertices(self, pose: Pose, vertex_ids: np.ndarray | None = None) -> np.ndarray:
+        """(V, 3) world vertex positions in `pose`; vertex_ids: (N,) only these, (N, 3)."""
+        if vertex_ids is not None:
+            return self.posed_vertices(pose)[vertex_ids]
         return self._posed(self._world_from_vertex_node(pose))
 
     def _world_from_vertex_node(self, pose: Pose) -> np.ndarray:
@@ -849,8 +851,9 @@ class TrackedModel(Protocol):
     node_weights: np.ndarray
     """(V, 16) each vertex's weight per node of `NODE_NAMES`."""
 
-    def posed_vertices(self, pose: Pose) -> np.ndarray:
-        """(V, 3) world vertices."""
+    def posed_vertices(self, pose: Pose, vertex_ids: np.ndarray | None = None) -> np.ndarray:
+        """(V, 3) world vertices; vertex_ids: (N,) only these, (N, 3), the same floats as
+        those rows of all of them."""
         ...
 
     def posed_surface(self, pose: Pose) -> tuple[np.ndarray, np.ndarray]:

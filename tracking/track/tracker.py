@@ -583,7 +583,7 @@ class _StageEnergy:
     def __call__(self, values: np.ndarray) -> float:
         self.evaluations += 1
         x = self.params(values)
-        vertices = self.energy.model.posed_vertices(Pose(x))[self.vertex_ids]
+        vertices = self.energy.model.posed_vertices(Pose(x), self.vertex_ids)
         counts = self.count.counts(vertices, self.local_faces)
         total = 0.0
         if self.prior is not None:

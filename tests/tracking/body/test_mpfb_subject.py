@@ -71,6 +71,21 @@ def test_weights_and_moving_faces(start):
     assert np.count_nonzero(parts ^ whole) <= 2
 
 
+def test_the_vertices_of_a_stage_are_posed_alone_with_the_same_floats(start):
+    # A stage of the tracker poses the vertices of the faces it moves alone
+    # (`MpfbModel.posed_vertices` with vertex_ids): the rows of the whole body, bit for bit.
+    forearm = np.zeros(len(NODE_NAMES), bool)
+    forearm[[NODE_INDEX["l_elbow"], NODE_INDEX["l_wrist"]]] = True
+    ids = np.unique(start.faces[start.faces_moved_by(forearm)])
+    assert 0 < len(ids) < len(start.posed_vertices(STRIDE)) // 4
+    rng = np.random.default_rng(3)
+    for pose in (STRIDE, *(random_pose(rng) for _ in range(5))):
+        whole = start.posed_vertices(pose)
+        assert np.array_equal(start.posed_vertices(pose, ids), whole[ids])
+        assert np.array_equal(start.posed_vertices(pose, np.arange(len(whole))), whole)
+    assert start.posed_vertices(STRIDE, np.zeros(0, int)).shape == (0, 3)
+
+
 def test_outline_derivatives_match_finite_differences(start):
     x = STRIDE.params.copy()
     free = np.array([PARAM_INDEX[n] for n in ("root_tx", "root_ry", "l_shoulder_rx",

@@ -32,6 +32,22 @@ def add_targets(kept: np.ndarray, weights: np.ndarray, starts: np.ndarray, rows:
 
 
 @numba.njit(cache=True, nogil=True)
+def _blended(skin: np.ndarray, bones: np.ndarray, weights: np.ndarray, v: int,
+             m: np.ndarray) -> None:  # fmt: skip
+    """m (3, 4) = sum_k weights[v, k] skin[bones[v, k]]: vertex v's blended matrix."""
+    for i in range(3):
+        for j in range(4):
+            m[i, j] = 0.0
+    for k in range(bones.shape[1]):
+        w = weights[v, k]
+        if w != 0.0:
+            b = bones[v, k]
+            for i in range(3):
+                for j in range(4):
+                    m[i, j] += w * skin[b, i, j]
+
+
+@numba.njit(cache=True, nogil=True)
 def blend_skin(skin: np.ndarray, bones: np.ndarray, weights: np.ndarray, vertices: np.ndarray,
                normals: np.ndarray, out_vertices: np.ndarray, out_normals: np.ndarray,
                ) -> None:  # fmt: skip
@@ -42,16 +58,7 @@ def blend_skin(skin: np.ndarray, bones: np.ndarray, weights: np.ndarray, vertice
     with_normals = normals.shape[0] == vertices.shape[0]
     m = np.empty((3, 4))
     for v in range(vertices.shape[0]):
-        for i in range(3):
-            for j in range(4):
-                m[i, j] = 0.0
-        for k in range(bones.shape[1]):
-            w = weights[v, k]
-            if w != 0.0:
-                b = bones[v, k]
-                for i in range(3):
-                    for j in range(4):
-                        m[i, j] += w * skin[b, i, j]
+        _blended(skin, bones, weights, v, m)
         x, y, z = vertices[v, 0], vertices[v, 1], vertices[v, 2]
         for i in range(3):
             out_vertices[v, i] = m[i, 0] * x + m[i, 1] * y + m[i, 2] * z + m[i, 3]
@@ -64,6 +71,21 @@ def blend_skin(skin: np.ndarray, bones: np.ndarray, weights: np.ndarray, vertice
             norm = max(np.sqrt(norm), 1e-12)
             for i in range(3):
                 out_normals[v, i] /= norm
+
+
+@numba.njit(cache=True, nogil=True)
+def blend_skin_at(skin: np.ndarray, bones: np.ndarray, weights: np.ndarray,
+                  vertices: np.ndarray, ids: np.ndarray, out_vertices: np.ndarray,
+                  ) -> None:  # fmt: skip
+    """`blend_skin`'s vertices ``ids`` alone (no normals): out_vertices[n] is what it makes of
+    vertex ids[n], the same floats (the same products and sums in the same order)."""
+    m = np.empty((3, 4))
+    for n in range(ids.shape[0]):
+        v = ids[n]
+        _blended(skin, bones, weights, v, m)
+        x, y, z = vertices[v, 0], vertices[v, 1], vertices[v, 2]
+        for i in range(3):
+            out_vertices[n, i] = m[i, 0] * x + m[i, 1] * y + m[i, 2] * z + m[i, 3]
 
 
 @numba.njit(cache=True, nogil=True)

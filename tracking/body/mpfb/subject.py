@@ -208,11 +208,12 @@ class MpfbModel:
         """This resolution's vertices ready to skin (`bind_vertices`), made once."""
         return bind_vertices(self.assets, self.rest, self.vertex_indices)
 
-    def posed_vertices(self, pose: Pose) -> np.ndarray:
+    def posed_vertices(self, pose: Pose, vertex_ids: np.ndarray | None = None) -> np.ndarray:
         """(V, 3) world vertices in ``pose``: `posed_body`'s, with the rig's kinematics and
         the skinning in compiled code and nothing else (the energy poses the body thousands of
-        times a frame)."""
-        from tracking.body.mpfb.skinning import blend_skin, skin_matrices
+        times a frame). vertex_ids: (N,) only these vertices, (N, 3), the same floats: a
+        stage of the tracker draws the vertices of the faces it moves alone."""
+        from tracking.body.mpfb.skinning import blend_skin, blend_skin_at, skin_matrices
 
         world, root = rig_world_rotations(self.rig, pose, self.shape, self.corrections)
         bones, weights, vertices = self._bound
@@ -220,6 +221,11 @@ class MpfbModel:
         skin_matrices(np.ascontiguousarray(world, dtype=np.float64), self._bone_order[0],
                       self._bone_order[1], self.rest.bone_heads_m,
                       np.asarray(root, dtype=np.float64), skin)  # fmt: skip
+        if vertex_ids is not None:
+            posed = np.empty((len(vertex_ids), 3))
+            blend_skin_at(skin, bones, weights, vertices,
+                          np.asarray(vertex_ids, dtype=np.int64), posed)
+            return posed
         posed = np.empty((len(vertices), 3))
         blend_skin(skin, bones, weights, vertices, np.zeros((0, 3)), posed, np.zeros((0, 3)))
         return posed
