@@ -175,6 +175,17 @@ suite's jump and climb_steps (34.4 -> 33.2 and 8.1 -> 8.8 mm: a wash); under 0.8
 at frame 0. Where the others fail it leads by far: 0.52 and 0.49 on the suite's cartwheel
 upside down (frames 23 and 27, XOR 0.487 -> 0.255 and 0.564 -> 0.279)."""
 
+_SECOND_HEIGHT_STARTS = 4
+"""A start searched at two heights (`start_heights`) refines at the second only the starts that
+scored lowest at the first, this many of the 12: about 4 s of the second height's 6 (session
+38). Each start's refinement is its own, so where the second height's winner is among them the
+start is the full search's, bit for bit. Measured with every start refined at both heights
+(session 38): of the suite's 45 first frames (15 clips, seeds 0-2), 23 were searched at two
+heights, and the second height's winner was the first height's best start in 12, its 2nd in 8,
+3rd in 1, 4th in 2 (the run at seed 0, which the second height won, 3656 against 4507 XOR px,
+and at seed 1); then on data it was not chosen on, the 15 clips' frame 150 (seed 0), 9 at two
+heights: 1st in 6, 2nd, 3rd and 4th in 1 each (squat, won by the first height)."""
+
 _AGAIN_STARTS = 2
 """A recovery's refined starts given `TrackConfig.recovery_passes` (`_pass_again`): the lowest
 two, one per core of the machines this runs on, so that side by side they take the time of one
@@ -752,15 +763,17 @@ class SilhouetteTracker:
         if estimate_shape:
             # The fit's height and the hull's along up (`start_heights`): the search runs at
             # each, and the lower XOR keeps its height.
-            searches = []
+            searches, ranked = [], None
             for height in start_heights(fit.pose, fit.shape, points, up, self.config.voxel_m):
                 self.model = self.body.tracking_model(height)
-                searches.append((self.model,
-                                 *self._start_search(masks, fit.pose, points, up, False)))
+                x, score, start, ranked = self._start_search(
+                    masks, fit.pose, points, up, False,
+                    only=None if ranked is None else ranked[:_SECOND_HEIGHT_STARTS])
+                searches.append((self.model, x, score, start))
             self.model, x, score, start = min(searches, key=lambda s: s[2])
             start += f" at {self.model.shape.height:.2f} m" if len(searches) > 1 else ""
         else:
-            x, score, start = self._start_search(masks, fit.pose, points, up, True, enough)
+            x, score, start, _ = self._start_search(masks, fit.pose, points, up, True, enough)
         energy = self._energy(masks)
         if estimate_shape and self.config.init_shape:
             x, swapped = self._shaped_winner(masks, energy, x)
@@ -773,12 +786,15 @@ class SilhouetteTracker:
     def _start_search(self, masks: Sequence[np.ndarray], fit: Pose, points: np.ndarray,
                       up: np.ndarray | None, known_shape: bool,
                       enough: Callable[[float], bool] | None = None,
-                      ) -> tuple[np.ndarray, float, str]:  # fmt: skip
+                      only: Sequence[int] | None = None,
+                      ) -> tuple[np.ndarray, float, str, list[int]]:  # fmt: skip
         """The start of `_initialise_from_hull` with the current model: the hull `fit`, upright
         bodies at `init_headings` headings and poses on the hull's extremities, each refined
-        by the whole hierarchy. Returns the winner, its `_objective` at `final_level`, and
-        which start it is. known_shape: not the start that sets the shape (a recovery);
-        enough: then `_pass_again`'s."""
+        by the whole hierarchy. Returns the winner, its `_objective` at `final_level`, which
+        start it is, and the starts' indices (the fit, the upright starts, then the
+        extremities') from the lowest score. known_shape: not the start that sets the shape
+        (a recovery); enough: then `_pass_again`'s; only: the indices of the starts refined
+        (the others score infinity; `_SECOND_HEIGHT_STARTS`), None: all."""
         # The hull fit can put a limb inside the trunk or lean the trunk to explain a
         # limb: upright bodies at several headings compete with it (each refined by the
         # whole hierarchy, limb grids over their whole range); the lowest XOR wins.
@@ -786,13 +802,24 @@ class SilhouetteTracker:
         pelvis = fit.params[:3].copy()
         if up is not None:  # standing on the hull's lowest point
             pelvis += (np.min(points @ up) + self.shape.hip_height - pelvis @ up) * up
-        starts = [self._best_hypothesis(energy, fit.params),
-                  *upright_starts(fit, up, self.config.init_headings, pelvis)]
+        uprights = upright_starts(fit, up, self.config.init_headings, pelvis)
+        # (The fit's left/right swaps and the extremities' poses, made only when refined.)
+        wanted = set(range(1 + len(uprights) + self.config.init_extremity_starts)
+                     if only is None else only)
+        starts = [self._best_hypothesis(energy, fit.params) if 0 in wanted else fit,
+                  *uprights]
         # Neither reaches a body upside down or sideways: poses whose head, hands
         # and feet are on the hull's extremities compete too.
-        ends = self._extremity_starts(energy, points)
-        refined = self._refine_starts(energy, [*starts, *ends])
-        scores = [self._objective(energy, x, self.config.final_level) for x in refined]
+        ends = (self._extremity_starts(energy, points)
+                if any(i >= len(starts) for i in wanted) else [])
+        candidates = [*starts, *ends]
+        picked = [i for i in range(len(candidates)) if i in wanted]
+        refined = [p.params for p in candidates]
+        for i, y in zip(picked, self._refine_starts(energy, [candidates[i] for i in picked]),
+                        strict=True):  # fmt: skip
+            refined[i] = y
+        scores = [self._objective(energy, refined[i], self.config.final_level)
+                  if i in wanted else np.inf for i in range(len(candidates))]
         if known_shape:
             refined, scores = self._pass_again(energy, refined, scores, enough)
         # When the start also sets the shape, an extremity start wins by a clear lead only;
@@ -805,7 +832,8 @@ class SilhouetteTracker:
             start = f"an upright start at {360 * (best - 1) // (len(starts) - 1)} deg from its fit"
         else:
             start = f"start {best - len(starts) + 1} of {len(ends)} from its extremities"
-        return refined[best], scores[best], start
+        return refined[best], scores[best], start, [int(i) for i in np.argsort(scores,
+                                                                              kind="stable")]
 
     def _side_by_side(self, job: Callable[[int], Any], count: int) -> list[Any]:
         """``[job(0), ..., job(count - 1)]`` of independent jobs, in `TrackConfig.workers`

@@ -223,6 +223,36 @@ def test_the_start_searched_at_two_heights_keeps_the_one_of_lower_xor(monkeypatc
     assert len(start_heights(bent, tall, points, up, voxel)) == 1
 
 
+def test_the_second_height_refines_the_first_heights_best_starts_alone(monkeypatch):
+    # `_start_search` with `only`: those starts are refined as in the full search (the same
+    # floats, the same winner among them); the others score infinity, and the fit's swaps
+    # and the extremities' poses are not made when none of them is asked for.
+    truth = _walk(1)[0]
+    masks = _masks(truth)
+    config = dataclasses.replace(SUPERQUADRIC, init_headings=4, init_extremity_starts=1,
+                                 init_shape=False)  # fmt: skip
+    tracker = SilhouetteTracker(CAMERAS, config, shape=SHAPE)
+    points, up = tracker.visual_hull_points(masks), np.array([0.0, 1.0, 0.0])
+    fit = Pose.from_dict({"root_ty": 0.95, "root_ry": 0.3})
+    with tracker._searching_start():
+        x, score, _, ranked = tracker._start_search(masks, fit, points, up, False)
+        assert sorted(ranked) == list(range(6))  # the fit, 4 upright, 1 from the extremities
+        before = tracker.evaluations
+        y, best, _, again = tracker._start_search(masks, fit, points, up, False,
+                                                  only=ranked[:2])  # fmt: skip
+        np.testing.assert_array_equal(y, x)
+        assert best == score and again[:2] == ranked[:2]
+        assert 0 < tracker.evaluations - before < before / 2
+        uprights = [i for i in ranked if 1 <= i <= 4][:2]
+        for name in ("_best_hypothesis", "_extremity_starts"):
+            monkeypatch.setattr(tracker, name, lambda *_: pytest.fail("made, not asked for"))
+        y, best, start, again = tracker._start_search(masks, fit, points, up, False,
+                                                      only=uprights)  # fmt: skip
+    # The two upright starts ranked as in the full search, the winner the better of them.
+    assert again[:2] == uprights and "upright start" in start and np.isfinite(best), start
+    assert best >= score
+
+
 def test_the_starts_refined_side_by_side_are_those_refined_in_turn():
     # `TrackConfig.workers`: the start's candidates refined in forked processes give the
     # poses, the evaluation count and the priors of the refinement in this process.
