@@ -403,27 +403,27 @@ Session 38, speed with the same poses, on a machine about 30% slower than sessio
 seed-0 suite at session 37's code: cartwheel 0.83 frames/s, bend_pickup 0.90, turn_pirouette
 0.74 here, against 1.35, 1.09 and 1.01 there; 12 clips as accurate to the 0.1 mm, but the
 cartwheel 19.9 mm against 39.1, arms_overhead 8.3 against 7.7, turn_pirouette 11.3 against
-11.4, mean 9.3 against 10.5: the tracks are chaotic, and this CPU rounds differently). Where a clip's time goes here (the cartwheel, ``mocap track`` timed per
-frame): the start 17.6 s (the hull fit 5.0, the search 6.3, the winner's four shapings 6.2),
-the shape pass about 8.5, each full recovery 11-14.5 (the hull fit 3.1, the search 5.5-5.9,
-the swaps 1.3-1.4, the last good pose's candidate about 1.4), a tracked frame 0.2-0.6. Two
-changes, each giving the poses it gave before, bit for bit: a stage of the hierarchy skins the
-vertices of the faces it moves alone (`MpfbModel.posed_vertices` with vertex_ids: 107 -> 57
-us a posing), and a start searched at two heights refines at the second only the first
-height's 4 best starts (`_SECOND_HEIGHT_STARTS`; the probe's figures are in its docstring:
-on 60 first frames the second height's winner was always among them). The two trees in turn
-(session 37's code, this, this, session 37's), ``mocap track`` of the seed-0 workspaces: kick
-51.3 / 48.5 s against 47.3 / 45.6; cartwheel 73.5 / 75.0 against 72.6 / 67.5; joints.csv
-byte-identical. The seed-0 suite with this code (nothing else running): joints.csv
-byte-identical to session 37's code's for all 15 clips; frames/s walk 1.49, run 1.68, jump
-1.57, cartwheel **0.77**, dance 1.47, boxing 1.35, bend_pickup **0.88**, wave 1.45, squat 1.17,
-sit_stand 1.33, climb_steps 1.32, kick 1.34, arms_overhead 1.36, turn_pirouette **0.80**,
-start_walk_stop 1.50: the three clips with full recoveries are under 1 frame/s on this
-machine (**not met**), the 12 without one at 1.17-1.68. Pose2Sim demo: 100/100 frames, median
-IoU 0.832, its start as before ("its fit at 1.81 m, its legs swapped"). Measured and not
-built: the winner's shapings for its 2 best swaps by XOR only. On the 60 first frames, the
-shaped winner was the 3rd or 4th by XOR before its proportions in 16 (arms_overhead@2: 9.7 mm
-against 13.8 for the best of the first two).
+11.4, mean 9.3 against 10.5: the tracks are chaotic, and this CPU rounds differently). Where a
+clip's time goes here (the cartwheel, ``mocap track`` timed per frame): the start 17.6 s (the
+hull fit 5.0, the search 6.3, the winner's four shapings 6.2), the shape pass about 8.5, each
+full recovery 11-14.5 (the hull fit 3.1, the search 5.5-5.9, the swaps 1.3-1.4, the last good
+pose's candidate about 1.4), a tracked frame 0.2-0.6. Two changes, each giving the poses it
+gave before, bit for bit: a stage of the hierarchy skins the vertices of the faces it moves
+alone (`MpfbModel.posed_vertices` with vertex_ids: 107 -> 57 us a posing), and a start searched
+at two heights refines at the second only the first height's 4 best starts
+(`_SECOND_HEIGHT_STARTS`; the probe's figures are in its docstring: on 60 first frames the
+second height's winner was always among them). The two trees in turn (session 37's code, this,
+this, session 37's), ``mocap track`` of the seed-0 workspaces: kick 51.3 / 48.5 s against 47.3
+/ 45.6; cartwheel 73.5 / 75.0 against 72.6 / 67.5; joints.csv byte-identical. The seed-0 suite
+with this code (nothing else running): joints.csv byte-identical to session 37's code's for all
+15 clips; frames/s walk 1.49, run 1.68, jump 1.57, cartwheel **0.77**, dance 1.47, boxing 1.35,
+bend_pickup **0.88**, wave 1.45, squat 1.17, sit_stand 1.33, climb_steps 1.32, kick 1.34,
+arms_overhead 1.36, turn_pirouette **0.80**, start_walk_stop 1.50: the three clips with full
+recoveries are under 1 frame/s on this machine (**not met**), the 12 without one at 1.17-1.68.
+Pose2Sim demo: 100/100 frames, median IoU 0.832, its start as before ("its fit at 1.81 m, its
+legs swapped"). Measured and not built: the winner's shapings for its 2 best swaps by XOR only.
+On the 60 first frames, the shaped winner was the 3rd or 4th by XOR before its proportions in
+16 (arms_overhead@2: 9.7 mm against 13.8 for the best of the first two).
 
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
