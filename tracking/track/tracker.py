@@ -813,13 +813,11 @@ class SilhouetteTracker:
         ends = (self._extremity_starts(energy, points)
                 if any(i >= len(starts) for i in wanted) else [])
         candidates = [*starts, *ends]
-        picked = [i for i in range(len(candidates)) if i in wanted]
-        refined = [p.params for p in candidates]
+        picked = sorted(i for i in wanted if i < len(candidates))
+        refined, scores = [p.params for p in candidates], [np.inf] * len(candidates)
         for i, y in zip(picked, self._refine_starts(energy, [candidates[i] for i in picked]),
                         strict=True):  # fmt: skip
-            refined[i] = y
-        scores = [self._objective(energy, refined[i], self.config.final_level)
-                  if i in wanted else np.inf for i in range(len(candidates))]
+            refined[i], scores[i] = y, self._objective(energy, y, self.config.final_level)
         if known_shape:
             refined, scores = self._pass_again(energy, refined, scores, enough)
         # When the start also sets the shape, an extremity start wins by a clear lead only;
