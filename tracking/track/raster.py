@@ -270,10 +270,14 @@ def covered_gains(vertices: np.ndarray, faces: np.ndarray, edges: np.ndarray,
 
     One thread: the views on numba's threads (``prange``) gave the energy 1.6-1.85x the
     evaluations per second on an idle 2-core machine, but two such processes side by side
-    (`make test`'s two workers) ran 3.5x slower than one thread each, OpenMP's threads
-    spinning between the evaluations (session 27). cams_from_world (V, 3, 4), Ks (V, 3, 3),
-    dists (V, 5), max_radius2s (V,): the cameras; gains (V, H, W), zero past a view's own size
-    (views of several sizes share the largest)."""
+    (`make test`'s two workers) ran 3.5x slower than one thread each, OpenMP's threads spinning
+    between the evaluations (session 27). Each run's gains summed from per-row prefix sums (the
+    same integers) counted 0.75-1.21x as fast on `benchmarks/xor_count.py`'s scene, but the
+    sums cost 3-5 ms to make at levels 0-1, once per stage (`_StageEnergy`), which counts a few
+    dozen to a few hundred times: not built (session 39).
+
+    cams_from_world (V, 3, 4), Ks (V, 3, 3), dists (V, 5), max_radius2s (V,): the cameras;
+    gains (V, H, W), zero past a view's own size (views of several sizes share the largest)."""
     totals = np.zeros(gains.shape[0], np.int64)
     uv = np.empty((vertices.shape[0], 2))
     kind = np.empty(faces.shape[0] + 1, np.int8)
