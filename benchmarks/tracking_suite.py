@@ -2,7 +2,8 @@
 the way users run the tracker.
 
     .venv/bin/python benchmarks/tracking_suite.py [--clips NAME ...] [--frames N]
-        [--start N | NAME=N ...] [--trackers current former no-extremities no-floor-band]
+        [--start N | NAME=N ...]
+        [--trackers current former no-extremities no-floor-band crouched]
         [--size WxH] [--keep DIR] [--repeats N] [--seeds S ...]
 
 Each clip (`CLIPS`: walk, run, jump, cartwheel, ...; some in Daz naming, which the BVH
@@ -14,7 +15,7 @@ sit_stand and 4 in kick, the Daz-named clips, whose rest pose in frame 0 is foll
 that ease the arms down into the capture; else 0;
 `tracking.body.bvh.leading_reference_frames`). `mocap track`
 tracks it with its defaults (the automatic start, the shape pass): the path users run is the
-path scored. ``--trackers`` (default: all four, on the same silhouettes):
+path scored. ``--trackers`` (default: all five, on the same silhouettes):
 
 * ``current``: `mocap track` as it is;
 * ``former``: the same with the divergence watch of issue 20 off (``--spike-xor-factor 0
@@ -26,6 +27,8 @@ path scored. ``--trackers`` (default: all four, on the same silhouettes):
 * ``no-floor-band``: a floor shadow's pixels counted like any other, and the start's fit
   given its slab (``--floor-band-m 0``), as before session 35 but for the search again of a
   track stuck after a divergence.
+* ``crouched``: the start with crouched bodies competing where the hull's fit is bent over
+  (``--init-crouched``; session 39, not the default).
 
 Printed per clip and tracker (`tracking_synthetic.track_case`): MPJPE against the subject's
 own joints (gt/joints.csv), raw and with each joint's mean offset over the clip removed; the
@@ -533,6 +536,7 @@ TRACKERS: dict[str, list[str]] = {
     "former": ["--spike-xor-factor", "0", "--high-xor-frames", "0"],
     "no-extremities": ["--init-extremity-starts", "0"],
     "no-floor-band": ["--floor-band-m", "0"],
+    "crouched": ["--init-crouched"],
 }
 """`mocap track` flags of each tracker (see the module docstring)."""
 RECOVERY_FRAMES = 5

@@ -31,7 +31,8 @@ height too (`start_heights`; the lower XOR keeps its height). A hull cannot tell
 right limbs: the fit and its left/right swaps of legs and arms (`swap_sides`) are each refined
 against the outlines. The best of them competes with
 upright stances at `init_headings` headings (`upright_starts`), since the fit can fold a limb
-into the trunk or lean the trunk to explain a limb, and with poses whose head, hands and feet
+into the trunk or lean the trunk to explain a limb (where the fit is bent over, crouched ones
+at those headings too: `crouched_starts`), and with poses whose head, hands and feet
 are on the hull's extremities (`tracking.track.extremities`: the best `init_extremity_starts`
 by XOR), since neither reaches a body upside down or sideways: each is refined by the whole
 hierarchy with the limbs' grids over their whole range, and the lowest XOR wins (where the
@@ -415,6 +416,15 @@ class TrackConfig:
     init_simplex_evals: int = field(
         default=120, metadata={"help": "evaluations of each simplex at initialisation"}
     )
+    init_crouched: bool = field(
+        default=False,
+        metadata={"help": "when the visual hull's fit is not upright, crouched bodies at the "
+                  "upright starts' headings compete at the start too (a body bent over, "
+                  "squatting, picking something up). Not the default: on the motion suite "
+                  "from clip frame 150 it took bend_pickup 56.8 -> 13.7 mm but the "
+                  "cartwheel 54.9 -> 302 mm (a start won by 3%% of XOR among starts all over "
+                  "50%%)"},
+    )  # fmt: skip
     recovery_passes: int = field(
         default=3,
         metadata={"help": "passes of the whole hierarchy given to the two best starts of a "
@@ -759,6 +769,7 @@ class SilhouetteTracker:
                                          min_limb_support=0.0, metric=False,
                                          hold=_START_HELD, workers=self.config.workers),
                        up=up)  # fmt: skip
+        bent = up is not None and not is_upright(fit.pose, fit.shape, up)
         estimate_shape = self.shape is None
         if estimate_shape:
             # The fit's height and the hull's along up (`start_heights`): the search runs at
@@ -767,13 +778,14 @@ class SilhouetteTracker:
             for height in start_heights(fit.pose, fit.shape, points, up, self.config.voxel_m):
                 self.model = self.body.tracking_model(height)
                 x, score, start, ranked = self._start_search(
-                    masks, fit.pose, points, up, False,
+                    masks, fit.pose, points, up, bent, False,
                     only=None if ranked is None else ranked[:_SECOND_HEIGHT_STARTS])
                 searches.append((self.model, x, score, start))
             self.model, x, score, start = min(searches, key=lambda s: s[2])
             start += f" at {self.model.shape.height:.2f} m" if len(searches) > 1 else ""
         else:
-            x, score, start, _ = self._start_search(masks, fit.pose, points, up, True, enough)
+            x, score, start, _ = self._start_search(masks, fit.pose, points, up, bent, True,
+                                                    enough)
         energy = self._energy(masks)
         if estimate_shape and self.config.init_shape:
             x, swapped = self._shaped_winner(masks, energy, x)
@@ -784,17 +796,19 @@ class SilhouetteTracker:
         return Pose(x), message
 
     def _start_search(self, masks: Sequence[np.ndarray], fit: Pose, points: np.ndarray,
-                      up: np.ndarray | None, known_shape: bool,
+                      up: np.ndarray | None, bent: bool, known_shape: bool,
                       enough: Callable[[float], bool] | None = None,
                       only: Sequence[int] | None = None,
                       ) -> tuple[np.ndarray, float, str, list[int]]:  # fmt: skip
         """The start of `_initialise_from_hull` with the current model: the hull `fit`, upright
-        bodies at `init_headings` headings and poses on the hull's extremities, each refined
-        by the whole hierarchy. Returns the winner, its `_objective` at `final_level`, which
-        start it is, and the starts' indices (the fit, the upright starts, then the
-        extremities') from the lowest score. known_shape: not the start that sets the shape
-        (a recovery); enough: then `_pass_again`'s; only: the indices of the starts refined
-        (the others score infinity; `_SECOND_HEIGHT_STARTS`), None: all."""
+        bodies at `init_headings` headings (crouched ones too where `bent`) and poses on the
+        hull's extremities, each refined by the whole hierarchy. Returns the winner, its
+        `_objective` at `final_level`, which start it is, and the starts' indices (the fit, the
+        upright starts, the crouched ones, then the extremities') from the lowest score. bent:
+        the fit is not upright (`is_upright`), and crouched bodies compete too. known_shape:
+        not the start that sets the shape (a recovery); enough: then `_pass_again`'s; only: the
+        indices of the starts refined (the others score infinity; `_SECOND_HEIGHT_STARTS`),
+        None: all."""
         # The hull fit can put a limb inside the trunk or lean the trunk to explain a
         # limb: upright bodies at several headings compete with it (each refined by the
         # whole hierarchy, limb grids over their whole range); the lowest XOR wins.
@@ -803,11 +817,15 @@ class SilhouetteTracker:
         if up is not None:  # standing on the hull's lowest point
             pelvis += (np.min(points @ up) + self.shape.hip_height - pelvis @ up) * up
         uprights = upright_starts(fit, up, self.config.init_headings, pelvis)
+        # A hull the fit finds bent over may be a body crouched: crouched bodies at the same
+        # headings compete too (on the fit's pelvis).
+        crouched = (crouched_starts(fit, up, self.config.init_headings)
+                    if bent and self.config.init_crouched else [])
         # (The fit's left/right swaps and the extremities' poses, made only when refined.)
-        wanted = set(range(1 + len(uprights) + self.config.init_extremity_starts)
-                     if only is None else only)
+        wanted = set(range(1 + len(uprights) + len(crouched)
+                           + self.config.init_extremity_starts) if only is None else only)
         starts = [self._best_hypothesis(energy, fit.params) if 0 in wanted else fit,
-                  *uprights]
+                  *uprights, *crouched]
         # Neither reaches a body upside down or sideways: poses whose head, hands
         # and feet are on the hull's extremities compete too.
         ends = (self._extremity_starts(energy, points)
@@ -827,7 +845,9 @@ class SilhouetteTracker:
         if best == 0:
             start = "its fit"
         elif best < len(starts):
-            start = f"an upright start at {360 * (best - 1) // (len(starts) - 1)} deg from its fit"
+            kind = "an upright" if best <= len(uprights) else "a crouched"
+            heading = 360 * ((best - 1) % len(uprights)) // len(uprights)
+            start = f"{kind} start at {heading} deg from its fit"
         else:
             start = f"start {best - len(starts) + 1} of {len(ends)} from its extremities"
         return refined[best], scores[best], start, [int(i) for i in np.argsort(scores,
@@ -1771,6 +1791,35 @@ def upright_starts(fit: Pose, up: np.ndarray | None, headings: int,
         for side, sign in (("l", 1.0), ("r", -1.0)):
             x[PARAM_INDEX[f"{side}_shoulder_rz"]] = np.deg2rad(10.0) * sign
             x[PARAM_INDEX[f"{side}_elbow_flex"]] = np.deg2rad(10.0)
+        starts.append(Pose(np.clip(x, LOWER_LIMITS, UPPER_LIMITS)))
+    return starts
+
+
+_CROUCH_DEG = {"pitch": 30.0, "spine_flex": 60.0, "hip_rx": -100.0, "hip_rz": 20.0,
+               "knee_flex": 115.0}
+"""The crouched starts' stance (`crouched_starts`), degrees: the whole body pitched forward, the
+chest bent forward, hips flexed and apart, knees bent deep. Taken from the suite's bend_pickup
+at clip frame 150, a deep squat reaching for the floor (its pitch 33, chest 60, hips 99-117 and
+30 apart, knees 113-119; session 39), where every other start ended 107 mm off or more."""
+
+
+def crouched_starts(fit: Pose, up: np.ndarray, headings: int) -> list[Pose]:
+    """`upright_starts` on `fit`'s pelvis at `headings` headings, crouched (`_CROUCH_DEG`):
+    a body bent over, squatting or picking something up, which neither the fit nor a standing
+    body reaches when the fit folds it wrong."""
+    c = {name: np.deg2rad(value) for name, value in _CROUCH_DEG.items()}
+    pitch = np.array([[1.0, 0.0, 0.0],
+                      [0.0, np.cos(c["pitch"]), -np.sin(c["pitch"])],
+                      [0.0, np.sin(c["pitch"]), np.cos(c["pitch"])]])  # fmt: skip
+    starts = []
+    for pose in upright_starts(fit, up, headings):
+        x = pose.params.copy()
+        x[3:6] = np.deg2rad(rotations_to_channels(root_rotation(pose) @ pitch, "ZXY"))
+        x[PARAM_INDEX["spine_flex"]] = c["spine_flex"]
+        for side, sign in (("l", 1.0), ("r", -1.0)):
+            x[PARAM_INDEX[f"{side}_hip_rx"]] = c["hip_rx"]
+            x[PARAM_INDEX[f"{side}_hip_rz"]] = sign * c["hip_rz"]
+            x[PARAM_INDEX[f"{side}_knee_flex"]] = c["knee_flex"]
         starts.append(Pose(np.clip(x, LOWER_LIMITS, UPPER_LIMITS)))
     return starts
 

@@ -14,11 +14,13 @@ from tests.helpers import recording_entities, run_cli, shared_dataset
 from tracking.body.bvh import read_bvh
 from tracking.body.model import (
     N_POSE_PARAMS,
+    NODE_INDEX,
     NODE_NAMES,
     PARAM_INDEX,
     BodyModel,
     BodyShape,
     Pose,
+    forward_kinematics,
     node_positions_in_world,
     pose_in_frame,
     root_rotation,
@@ -31,6 +33,7 @@ from tracking.track.tracker import (
     FrameResult,
     SilhouetteTracker,
     TrackConfig,
+    crouched_starts,
     start_height,
     start_heights,
     upright_starts,
@@ -235,10 +238,10 @@ def test_the_second_height_refines_the_first_heights_best_starts_alone(monkeypat
     points, up = tracker.visual_hull_points(masks), np.array([0.0, 1.0, 0.0])
     fit = Pose.from_dict({"root_ty": 0.95, "root_ry": 0.3})
     with tracker._searching_start():
-        x, score, _, ranked = tracker._start_search(masks, fit, points, up, False)
+        x, score, _, ranked = tracker._start_search(masks, fit, points, up, False, False)
         assert sorted(ranked) == list(range(6))  # the fit, 4 upright, 1 from the extremities
         before = tracker.evaluations
-        y, best, _, again = tracker._start_search(masks, fit, points, up, False,
+        y, best, _, again = tracker._start_search(masks, fit, points, up, False, False,
                                                   only=ranked[:2])  # fmt: skip
         np.testing.assert_array_equal(y, x)
         assert best == score and again[:2] == ranked[:2]
@@ -246,7 +249,7 @@ def test_the_second_height_refines_the_first_heights_best_starts_alone(monkeypat
         uprights = [i for i in ranked if 1 <= i <= 4][:2]
         for name in ("_best_hypothesis", "_extremity_starts"):
             monkeypatch.setattr(tracker, name, lambda *_: pytest.fail("made, not asked for"))
-        y, best, start, again = tracker._start_search(masks, fit, points, up, False,
+        y, best, start, again = tracker._start_search(masks, fit, points, up, False, False,
                                                       only=uprights)  # fmt: skip
     # The two upright starts ranked as in the full search, the winner the better of them.
     assert again[:2] == uprights and "upright start" in start and np.isfinite(best), start
@@ -314,6 +317,60 @@ def test_upright_starts_stand_on_the_given_up_at_even_headings():
     steps = np.diff(np.unwrap(headings))
     assert np.allclose(steps, np.pi / 2)
     assert upright_starts(fit, up, 0) == []
+
+
+def test_crouched_starts_are_the_upright_ones_bent_over_on_the_fits_pelvis():
+    """`crouched_starts`: the upright starts' headings, on the fit's pelvis, each pitched
+    forward, its chest bent and its hips and knees flexed deep (`_CROUCH_DEG`); a squat: the
+    knees in front of the pelvis and below it, the neck ahead of the pelvis."""
+    up = np.array([0.0, 1.0, 0.0])
+    fit = Pose.from_dict({"root_tx": 0.2, "root_ty": 0.6, "root_tz": -0.1, "root_ry": 0.7,
+                          "spine_flex": 1.2})  # fmt: skip
+    uprights, crouched = upright_starts(fit, up, 4), crouched_starts(fit, up, 4)
+    assert len(crouched) == 4
+    for standing, pose in zip(uprights, crouched, strict=True):
+        assert np.allclose(pose.params[:3], fit.params[:3])
+        ahead = root_rotation(standing)[:, 2]  # the heading of the upright start
+        world = forward_kinematics(pose, SHAPE)[:, :3, 3]
+        pelvis = world[NODE_INDEX["pelvis"]]
+        for knee in ("l_knee", "r_knee"):
+            assert (world[NODE_INDEX[knee]] - pelvis) @ ahead > 0.2
+            assert (world[NODE_INDEX[knee]] - pelvis) @ up < 0.1
+        assert (world[NODE_INDEX["neck"]] - pelvis) @ ahead > 0.2
+        assert pose.as_dict()["l_knee_flex"] == pytest.approx(np.deg2rad(115.0))
+    assert crouched_starts(fit, up, 0) == []
+
+
+def test_crouched_bodies_compete_where_the_fit_is_bent_over_when_asked(monkeypatch):
+    """``--init-crouched``: a fit that is not upright (`bent`) gets crouched starts at the
+    upright starts' headings among the candidates, and one that wins is named so; without
+    the option, or for an upright fit, none. (The refinements are skipped: the candidates
+    are counted, and the one made to score lowest is named.)"""
+    masks = _masks(_walk(1)[0])
+    points, up = None, np.array([0.0, 1.0, 0.0])
+    fit = Pose.from_dict({"root_ty": 0.95, "root_ry": 0.3})
+    for crouched, bent, count in ((True, True, 1 + 4 + 4), (True, False, 1 + 4),
+                                  (False, True, 1 + 4)):  # fmt: skip
+        config = dataclasses.replace(SUPERQUADRIC, init_headings=4, init_extremity_starts=0,
+                                     init_crouched=crouched)  # fmt: skip
+        tracker = SilhouetteTracker(CAMERAS, config, shape=SHAPE)
+        points = tracker.visual_hull_points(masks) if points is None else points
+        made = []
+
+        def unrefined(energy, starts, made=made):
+            made.extend(starts)
+            return [p.params.copy() for p in starts]
+
+        monkeypatch.setattr(tracker, "_refine_starts", unrefined)
+        monkeypatch.setattr(tracker, "_best_hypothesis", lambda energy, x: Pose(x))
+        # The last candidate scores lowest: the crouched start at 270 degrees, if made.
+        monkeypatch.setattr(tracker, "_objective", lambda energy, y, level, made=made: (
+            0.0 if any(np.array_equal(y, p.params) for p in made[-1:]) else 1.0))
+        with tracker._searching_start():
+            _, _, start, ranked = tracker._start_search(masks, fit, points, up, bent, False)
+        assert len(ranked) == count, (crouched, bent, ranked)
+        assert start == ("a crouched start at 270 deg from its fit" if count == 9
+                         else "an upright start at 270 deg from its fit"), start
 
 
 def test_visual_hull_contains_the_body():
