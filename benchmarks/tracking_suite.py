@@ -3,7 +3,7 @@ the way users run the tracker.
 
     .venv/bin/python benchmarks/tracking_suite.py [--clips NAME ...] [--frames N]
         [--start N | NAME=N ...]
-        [--trackers current former no-extremities no-floor-band crouched]
+        [--trackers current former no-extremities no-floor-band crouched no-back]
         [--size WxH] [--keep DIR] [--repeats N] [--seeds S ...]
 
 Each clip (`CLIPS`: walk, run, jump, cartwheel, ...; some in Daz naming, which the BVH
@@ -15,7 +15,7 @@ sit_stand and 4 in kick, the Daz-named clips, whose rest pose in frame 0 is foll
 that ease the arms down into the capture; else 0;
 `tracking.body.bvh.leading_reference_frames`). `mocap track`
 tracks it with its defaults (the automatic start, the shape pass): the path users run is the
-path scored. ``--trackers`` (default: all five, on the same silhouettes):
+path scored. ``--trackers`` (default: all six, on the same silhouettes):
 
 * ``current``: `mocap track` as it is;
 * ``former``: the same with the divergence watch of issue 20 off (``--spike-xor-factor 0
@@ -29,6 +29,8 @@ path scored. ``--trackers`` (default: all five, on the same silhouettes):
   track stuck after a divergence.
 * ``crouched``: the start with crouched bodies competing where the hull's fit is bent over
   (``--init-crouched``; session 39, not the default).
+* ``no-back``: no opening tracked again backwards (``--back-xor-factor 0``), as before
+  session 40.
 
 Printed per clip and tracker (`tracking_synthetic.track_case`): MPJPE against the subject's
 own joints (gt/joints.csv), raw and with each joint's mean offset over the clip removed; the
@@ -546,6 +548,7 @@ TRACKERS: dict[str, list[str]] = {
     "no-extremities": ["--init-extremity-starts", "0"],
     "no-floor-band": ["--floor-band-m", "0"],
     "crouched": ["--init-crouched"],
+    "no-back": ["--back-xor-factor", "0"],
 }
 """`mocap track` flags of each tracker (see the module docstring)."""
 RECOVERY_FRAMES = 5

@@ -399,6 +399,14 @@ class TrackConfig:
     shape_stride: int = field(
         default=4, metadata={"help": "frame stride of the shape pass's joint refinement"}
     )
+    back_xor_factor: float = field(
+        default=1.2,
+        metadata={"help": "the opening of a track (its first --shape-frames frames) is "
+                  "tracked again backwards, from its frame of lowest XOR, when its first "
+                  "frame's XOR is over this factor times that (a start gone wrong that the "
+                  "track found its way out of); each frame keeps the lower XOR, in the shape "
+                  "pass too (0 = off)"},
+    )  # fmt: skip
     init_headings: int = field(
         default=8,
         metadata={"help": "upright starting poses, at this many headings, that compete with "
@@ -499,7 +507,7 @@ class TrackConfig:
                 raise UserError(f"{flag(name)} must be >= {low}, got {getattr(self, name)}")
         for name in ("prior_weight", "twist_weight", "range_gain", "spike_xor_factor",
                      "high_xor_factor", "xor_margin", "max_unexplained_share",
-                     "floor_band_m"):
+                     "floor_band_m", "back_xor_factor"):
             if getattr(self, name) < 0:
                 raise UserError(f"{flag(name)} must be >= 0, got {getattr(self, name)}")
         for name in ("prior_scale_deg_s", "prior_scale_m_s", "twist_scale_deg",
@@ -690,6 +698,7 @@ class SilhouetteTracker:
         # While the start is searched (the visual-hull start, the shape pass), the spine's side
         # bend and twist stay 0 (`_START_HELD`).
         self._starting = False
+        self._backwards = False  # `track_back`: the divergence watch is forwards in time
 
     @property
     def shape(self) -> BodyShape | None:
@@ -1064,10 +1073,10 @@ class SilhouetteTracker:
         """`calibrate_shape` (the start's parameters held)."""
         cfg = self.config
         stride = max(cfg.shape_stride, 1)
-        picked: list[tuple[Sequence[np.ndarray], Pose]] = []
         # The frames after the last one refined tell the shape nothing: not tracked (3 of the
         # default 24, about 0.8 s of a start).
         needed = sequence[:(len(sequence) - 1) // stride * stride + 1]
+        results: list[FrameResult] = []
         for index, masks in enumerate(needed):
             result = self.track(index, masks)
             if index == 0:
@@ -1078,11 +1087,16 @@ class SilhouetteTracker:
                 if index == 0:
                     raise TrackingLost(result.event.removeprefix("lost: "))
                 break
-            if index % stride == 0:
-                picked.append((masks, result.pose))
+            results.append(result)
         else:  # the frames not needed are done too
             for _ in sequence[len(needed):] if progress is not None else ():
                 progress()
+        # A start gone wrong is found from the frames after it: the shape comes from those.
+        back = self.track_back(results, lambda index: needed[index])
+        if 0 in back:
+            self._start_event += f", the first {max(back) + 1} tracked back"
+        results = [back.get(i, r) for i, r in enumerate(results)]
+        picked = [(needed[i], r.pose) for i, r in enumerate(results) if i % stride == 0]
         # Which frames of `sequence` (indices) the shape came from: fewer than a full pass's
         # when the sequence is short or the pass lost the subject (`mocap track` warns).
         self.shape_frames_used = [i for i in range(len(sequence)) if i % stride == 0
@@ -1358,6 +1372,90 @@ class SilhouetteTracker:
                     event="; ".join(part for part in (event, result.event) if part))
         return result
 
+    def track_back(self, results: Sequence[FrameResult],
+                   masks_of: Callable[[int], Sequence[np.ndarray]],
+                   progress: Callable[[], object] | None = None) -> dict[int, FrameResult]:
+        """The opening of a track tracked again backwards: `results` (a sequence's, in frame
+        order; `masks_of`: a frame's silhouettes), from the frame of lowest XOR among its first
+        `shape_frames` (while each has a pose and is "init" or "tracked") back to the first,
+        when the first's XOR is over `back_xor_factor` times that. A start that went wrong
+        and that the track found its way out of (the limbs' search, the mend) is then found
+        from the frames after it. The backward track replaces the forward one from the
+        frame where the two's summed energies are lowest (one switch: both are continuous)
+        to the anchor. Returns the replacing results by index into `results` (the first
+        keeps its status and says it was tracked back). `progress`: called once per frame
+        tracked back.
+
+        Measured (`tracking_suite.py`, clip frame 150): boxing's start held both arms in
+        a guard in front of the chest, 220-390 mm off at XOR 17.7%, and the mend found the
+        right arm at frame 6; tracked back from frame 16 (10.3%), its first 16 frames went
+        from 92-104 mm to 7-9 (session 40)."""
+        factor = self.config.back_xor_factor
+        first = next((i for i, r in enumerate(results) if r.pose is not None), None)
+        if factor <= 0 or first is None:
+            return {}
+        opening = []
+        for i in range(first, min(first + max(self.config.shape_frames, 1), len(results))):
+            if results[i].pose is None or results[i].status not in ("init", "tracked"):
+                break
+            opening.append(i)
+        xor = [results[i].xor_fraction for i in opening]
+        anchor = opening[int(np.argmin(xor))]
+        if anchor == first or xor[0] <= factor * min(xor):
+            return {}
+        back: dict[int, FrameResult] = {}
+        with self._state_kept():
+            # The prediction runs backwards: the frame after the anchor, then the anchor.
+            self.history = [results[i].pose.params.copy() for i in (anchor + 1, anchor)
+                            if i < len(results) and results[i].pose is not None]
+            self._lost_since, self._backwards = None, True
+            for i in range(anchor - 1, first - 1, -1):
+                result = self.track(results[i].frame, masks_of(results[i].frame))
+                if progress is not None:
+                    progress()
+                if result.pose is None:
+                    break
+                back[i] = result
+        if not back:
+            return {}
+        # Backwards from `switch` to the anchor, forwards before it: the lowest sum.
+        energies = {s: sum(results[i].energy for i in range(first, s))
+                    + sum(back[i].energy for i in range(s, anchor))
+                    for s in range(min(back), anchor + 1)}  # fmt: skip
+        switch = min(energies, key=energies.__getitem__)
+        if switch == anchor:  # the forward track is the lower all along
+            return {}
+        replaced = {i: back[i] for i in range(switch, anchor)}
+        if switch > first:  # the two tracks meet here: say so
+            said = f"the track back from frame {results[anchor].frame} starts here"
+            replaced[switch] = dataclasses.replace(
+                back[switch], event="; ".join(part for part in (said, back[switch].event)
+                                              if part))  # fmt: skip
+        if first in replaced:
+            start = results[first]
+            said = f"tracked back from frame {results[anchor].frame}"
+            replaced[first] = dataclasses.replace(
+                replaced[first], status=start.status,
+                event="; ".join(part for part in (start.event, said, replaced[first].event)
+                                if part))  # fmt: skip
+        return replaced
+
+    @contextmanager
+    def _state_kept(self) -> Iterator[None]:
+        """What tracking a frame changes of the tracker (the prediction's history, the
+        divergence watch, the last good pose, the lost frames, the mend's back-off), as it was
+        before: `track_back` tracks frames again without changing the track that follows."""
+        import copy
+
+        names = ("history", "watch", "_last_good", "_lost_since", "_gap_statuses",
+                 "_tracked_any", "_xor_floor", "_mend_failed_at", "_backwards")
+        saved = {name: copy.deepcopy(getattr(self, name)) for name in names}
+        try:
+            yield
+        finally:
+            for name, value in saved.items():
+                setattr(self, name, value)
+
     def unexplained_share(self, masks: Sequence[np.ndarray], pose: Pose) -> float:
         """The share of this frame's visual hull that `pose` leaves out
         (`tracking.track.unexplained.unexplained_hull_part`, at `TrackConfig.unexplained_m`; 0
@@ -1430,7 +1528,7 @@ class SilhouetteTracker:
         if share <= cfg.max_unexplained_share or not cfg.mend_unexplained or not len(part):
             return x, ""
         if (self._mend_failed_at is not None
-                and 0 <= frame - self._mend_failed_at < MEND_BACKOFF_FRAMES):
+                and abs(frame - self._mend_failed_at) < MEND_BACKOFF_FRAMES):  # (`track_back`)
             return x, ""
         joints = self.model.joints(Pose(x))
         centre = part.mean(axis=0)
@@ -1544,7 +1642,9 @@ class SilhouetteTracker:
                 if e > limit:
                     why = (f"XOR {e / area:.1%} of the silhouette, over the absolute bar "
                            f"{limit / area:.0%}")
-                elif not self._starting:  # the shape pass's model is not the subject's yet
+                elif not self._starting and not self._backwards:
+                    # The shape pass's model is not the subject's yet; a track backwards
+                    # has no recent frames of its own.
                     why = self.watch.verdict(e / area)
             if why:
                 # A second subject makes a divergence (its silhouettes are unexplained): say
@@ -1573,7 +1673,8 @@ class SilhouetteTracker:
                 else:
                     status = "recovered"
                     event = f"recovered from {found} (XOR {e / area:.1%}): {why}"
-            elif (not event and not self._starting and self.watch.diverged is not None
+            elif (not event and not self._starting and not self._backwards
+                  and self.watch.diverged is not None
                   and (frame - self.watch.diverged[0]) % _SEARCH_AGAIN_FRAMES == 0
                   and e > self.watch.diverged[1] * area):
                 # Still over the bar of before a divergence the search found nothing better

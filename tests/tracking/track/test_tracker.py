@@ -471,6 +471,43 @@ def test_cli_synth_then_track_writes_every_output(tmp_path):
     assert report.stderr.strip().count("\n") == 0
 
 
+def _frame_errors_mm(ws) -> dict[int, float]:
+    """Per frame, the mean distance (mm) of tracks/joints.csv's joints to gt/joints.csv's."""
+    def read(path):
+        with path.open() as handle:
+            return {(int(r["frame"]), r["joint"]): np.array([float(r[k]) for k in "xyz"])
+                    for r in csv.DictReader(handle)}  # fmt: skip
+
+    tracked, truth = read(ws / "tracks" / "joints.csv"), read(ws / "gt" / "joints.csv")
+    frames = sorted({f for f, _ in tracked})
+    return {f: 1000 * float(np.mean([np.linalg.norm(xyz - truth[key])
+                                     for key, xyz in tracked.items() if key[0] == f]))
+            for f in frames}  # fmt: skip
+
+
+@pytest.mark.slow  # two tracks of 24 frames at 640x480: 100 s
+@pytest.mark.shared_data
+def test_a_start_gone_wrong_is_tracked_back_from_the_frames_after_it(tmp_path):
+    """The motion suite's boxing from clip frame 150 (`tracking_suite.py --start 150`): the
+    automatic start holds both arms in a guard in front of the chest, 220-390 mm off, and the
+    track finds them a few frames later. Tracked back from there, the first frames are right;
+    with --back-xor-factor 0 they are not."""
+    ws = tmp_path / "boxing"
+    made = run_cli("synth", ws, "--bvh", shared_dataset("mocap_bvh") / "cmu_boxing.bvh",
+                   "--frames", "60", "--first-frame", "150")  # fmt: skip
+    assert made.returncode == 0, made.stderr
+    # The suite's 60 frames (they set the ring of cameras), the first 24 tracked.
+    off = run_cli("track", ws, "--last", "23", "--back-xor-factor", "0")
+    assert off.returncode == 0, off.stderr
+    assert np.mean([_frame_errors_mm(ws)[f] for f in range(4)]) > 60
+    result = run_cli("track", ws, "--last", "23", "--overwrite")
+    assert result.returncode == 0, result.stderr
+    errors = _frame_errors_mm(ws)
+    assert max(errors[f] for f in range(4)) < 30, errors
+    pose = json.loads((ws / "tracks" / "pose.json").read_text())
+    assert "tracked back" in pose["frames"][0]["event"]
+
+
 @pytest.mark.shared_data
 def test_cli_track_from_a_given_pose_in_another_frame(tmp_path):
     """--init-pose FILE: a pose file in the world frame of a Z-up rig (world_from_upright the
@@ -528,6 +565,103 @@ def test_the_shape_pass_tracks_no_frame_after_its_last_refined_one(monkeypatch):
     assert (first.params == 0).all()
 
 
+def _opening(energies, tracker, backwards, seen):
+    """Stand-ins for `track_back`'s test: the forward results of `energies` (XOR pixels of
+    a silhouette of 100; each pose's parameters all its frame's number), and `tracker.track`
+    tracking frame f backwards at energy backwards[f] (pose parameters 100 + f), noting in
+    `seen` the frame, the prediction's history and whether the divergence watch was off."""
+    results = [FrameResult(f, Pose(np.full(N_POSE_PARAMS, float(f))), e, 100.0, 0, 0.0,
+                           "init from its fit" if f == 0 else "",
+                           "init" if f == 0 else "tracked")
+               for f, e in enumerate(energies)]  # fmt: skip
+
+    def track(frame, masks, init=None):
+        seen.append((frame, [int(x[0]) for x in tracker.history], tracker._backwards))
+        tracker.history = [*tracker.history[-1:], np.full(N_POSE_PARAMS, 100.0 + frame)]
+        return FrameResult(frame, Pose(np.full(N_POSE_PARAMS, 100.0 + frame)),
+                           backwards[frame], 100.0, 0, 0.0, "", "tracked")  # fmt: skip
+
+    tracker.track = track
+    return results
+
+
+def test_a_wrong_opening_is_tracked_back_from_its_frame_of_lowest_xor():
+    """The first frame at 30% XOR, the lowest 10% at frame 5: frames 4 to 0 are tracked again
+    backwards from frame 5 (the prediction from frames 6 and 5), and each of them replaces the
+    forward one, whose summed energies are higher. The first keeps its status "init" and
+    says so; the watch is off while tracking back, and on again after."""
+    tracker, seen = SilhouetteTracker(CAMERAS, SUPERQUADRIC), []
+    results = _opening([30, 28, 26, 20, 12, 10, 11, 12, 12, 12], tracker,
+                       {4: 12, 3: 11, 2: 11, 1: 10, 0: 11}, seen)
+    back = tracker.track_back(results, lambda frame: [frame])
+    assert [s[0] for s in seen] == [4, 3, 2, 1, 0]
+    assert seen[0][1] == [6, 5] and all(s[2] for s in seen) and not tracker._backwards
+    assert sorted(back) == [0, 1, 2, 3, 4]
+    assert all(back[f].pose.params[0] == 100 + f for f in back)
+    assert back[0].status == "init" and back[1].status == "tracked"
+    assert back[0].event == "init from its fit; tracked back from frame 5"
+
+
+def test_a_track_back_worse_before_some_frame_joins_the_forward_one_there():
+    """Backwards, frames 4 and 3 are lower than forwards but 2 to 0 far higher: the forward
+    track holds frames 0-2 and the backward one 3-4 (the lowest summed energy), and frame 3
+    says the two meet there."""
+    tracker, seen = SilhouetteTracker(CAMERAS, SUPERQUADRIC), []
+    results = _opening([30, 28, 26, 20, 12, 10, 11], tracker,
+                       {4: 11, 3: 10, 2: 40, 1: 40, 0: 40}, seen)
+    back = tracker.track_back(results, lambda frame: [frame])
+    assert sorted(back) == [3, 4]
+    assert back[3].event == "the track back from frame 5 starts here" and back[4].event == ""
+
+
+def test_a_track_back_higher_everywhere_replaces_nothing():
+    """Backwards, every frame is higher than forwards: nothing is replaced (the forward track
+    from the first frame to the anchor is the lowest sum)."""
+    tracker, seen = SilhouetteTracker(CAMERAS, SUPERQUADRIC), []
+    results = _opening([30, 28, 26, 20, 12, 10, 11], tracker,
+                       {4: 13, 3: 21, 2: 27, 1: 29, 0: 31}, seen)
+    assert tracker.track_back(results, lambda frame: [frame]) == {} and len(seen) == 5
+
+
+@pytest.mark.parametrize("factor", [0.0, 3.5])
+def test_no_track_back_when_off_or_the_first_frame_is_near_the_lowest(factor):
+    """--back-xor-factor 0 is off; 3.5: the first frame's 30% is under 3.5 times the lowest
+    10%, and the opening is kept as it is, nothing tracked again."""
+    config = dataclasses.replace(SUPERQUADRIC, back_xor_factor=factor)
+    tracker, seen = SilhouetteTracker(CAMERAS, config), []
+    results = _opening([30, 28, 26, 20, 12, 10, 11], tracker, {}, seen)
+    assert tracker.track_back(results, lambda frame: [frame]) == {} and seen == []
+
+
+def test_the_shape_pass_refines_the_shape_on_the_poses_tracked_back(monkeypatch):
+    """A shape pass whose first frame is far above its lowest XOR: the segment lengths are
+    refined on the poses of the frames tracked back (0 and 4 of frames 0-8, stride 4), and
+    its start says how many were."""
+    tracker = SilhouetteTracker(CAMERAS, dataclasses.replace(SUPERQUADRIC, shape_stride=4))
+    forward = [40, 30, 20, 15, 12, 11, 10, 11, 12]
+    refined = []
+
+    def track(frame, masks, init=None):
+        if tracker._backwards:
+            return FrameResult(frame, Pose(np.full(N_POSE_PARAMS, 100.0 + frame)), 10.0, 100.0,
+                               0, 0.0, "", "tracked")  # fmt: skip
+        return FrameResult(frame, Pose(np.full(N_POSE_PARAMS, float(frame))), forward[frame],
+                           100.0, 0, 0.0, "init" if frame == 0 else "",
+                           "init" if frame == 0 else "tracked")  # fmt: skip
+
+    def refine_shape(sequence, poses):
+        refined.extend(int(p.params[0]) for p in poses)
+        return poses
+
+    monkeypatch.setattr(tracker, "track", track)
+    monkeypatch.setattr(tracker, "_refine_shape", refine_shape)
+    monkeypatch.setattr(tracker, "_energy", lambda masks: None)
+    monkeypatch.setattr(tracker, "_refine_all", lambda energy, x, init=False: x)
+    first = tracker.calibrate_shape([[i] for i in range(9)])
+    assert refined == [100, 104, 8] and first.params[0] == 100
+    assert tracker._start_event.endswith("the first 6 tracked back")
+
+
 def test_cli_track_needs_a_video_workspace(tmp_path):
     result = run_cli("track", tmp_path)
     assert result.returncode == 2 and "not a video workspace" in result.stderr
@@ -536,7 +670,8 @@ def test_cli_track_needs_a_video_workspace(tmp_path):
 @pytest.mark.parametrize("flag", [["--contour-level", "3"], ["--shape-stride", "0"],
                                   ["--levels", "0"], ["--max-xor-fraction", "0"],
                                   ["--init-headings", "-1"], ["--hold", "l_knee_flex"],
-                                  ["--init-starts", "0"], ["--init-twists", "0"]])
+                                  ["--init-starts", "0"], ["--init-twists", "0"],
+                                  ["--back-xor-factor", "-1"]])
 def test_cli_track_rejects_bad_settings_in_one_line(tmp_path, flag):
     result = run_cli("track", tmp_path, *flag)
     assert result.returncode == 2 and "Traceback" not in result.stderr
