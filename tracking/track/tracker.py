@@ -404,8 +404,8 @@ class TrackConfig:
         metadata={"help": "the opening of a track (its first --shape-frames frames) is "
                   "tracked again backwards, from its frame of lowest XOR, when its first "
                   "frame's XOR is over this factor times that (a start gone wrong that the "
-                  "track found its way out of); each frame keeps the lower XOR, in the shape "
-                  "pass too (0 = off)"},
+                  "track found its way out of), in the shape pass too; the frames tracked "
+                  "back replace the others where their XOR is clearly lower (0 = off)"},
     )  # fmt: skip
     init_headings: int = field(
         default=8,
@@ -1382,14 +1382,16 @@ class SilhouetteTracker:
         and that the track found its way out of (the limbs' search, the mend) is then found
         from the frames after it. The backward track replaces the forward one from the
         frame where the two's summed energies are lowest (one switch: both are continuous)
-        to the anchor. Returns the replacing results by index into `results` (the first
-        keeps its status and says it was tracked back). `progress`: called once per frame
-        tracked back.
+        to the anchor, where its XOR there is clearly lower (`_BACK_GAIN`). Returns the
+        replacing results by index into `results` (the first keeps its status and says it
+        was tracked back). `progress`: called once per frame tracked back. What tracking a
+        frame changes of the tracker is as before after it (`_state_kept`): the track goes
+        on from its last frame.
 
-        Measured (`tracking_suite.py`, clip frame 150): boxing's start held both arms in
-        a guard in front of the chest, 220-390 mm off at XOR 17.7%, and the mend found the
-        right arm at frame 6; tracked back from frame 16 (10.3%), its first 16 frames went
-        from 92-104 mm to 7-9 (session 40)."""
+        Measured (`tracking_suite.py --start 150`, session 40): boxing's start held both arms
+        in a guard in front of the chest, 220-390 mm off at XOR 17.7%, and the track found
+        them at frame 6; its shape pass tracked back from frame 20, and its first 20 frames
+        went from 92-104 mm to 4-12 (the clip 21.3 -> 5.8 mm)."""
         factor = self.config.back_xor_factor
         first = next((i for i, r in enumerate(results) if r.pose is not None), None)
         if factor <= 0 or first is None:
@@ -1423,8 +1425,9 @@ class SilhouetteTracker:
                     + sum(back[i].energy for i in range(s, anchor))
                     for s in range(min(back), anchor + 1)}  # fmt: skip
         switch = min(energies, key=energies.__getitem__)
-        if switch == anchor:  # the forward track is the lower all along
-            return {}
+        forward = sum(results[i].energy for i in range(switch, anchor))
+        if switch == anchor or energies[switch] - energies[anchor] > -_BACK_GAIN * forward:
+            return {}  # not clearly lower: the forward track stays
         replaced = {i: back[i] for i in range(switch, anchor)}
         if switch > first:  # the two tracks meet here: say so
             said = f"the track back from frame {results[anchor].frame} starts here"
@@ -1763,6 +1766,15 @@ class SilhouetteTracker:
         self.history = history if found is None else []
         return best_x, best_e, found
 
+
+_BACK_GAIN = 0.1
+"""An opening tracked back (`SilhouetteTracker.track_back`) replaces the forward track only where
+its XOR summed over the frames it replaces is at least this fraction lower: two tracks of a
+right start differ by the silhouettes' noise, and the shape pass would then take its lengths
+from poses no better. Measured on the suite's first 24 frames at seed 0 and from clip frame 150
+(27 clips, the shape pass and the track; session 40): where the start had gone wrong, 0.14-0.26
+lower (the cartwheel, boxing, bend_pickup and squat from frame 150); elsewhere 0.00-0.06 (the
+walk's shape pass 0.017, and its shape from those poses cost it 7.8 -> 8.4 mm)."""
 
 _SEARCH_AGAIN_FRAMES = 3
 """After a divergence the start search found nothing better for, the frames between searches
