@@ -95,7 +95,8 @@ def test_a_subject_who_enters_late_is_tracked_from_its_first_frame(tmp_path):
     assert result.returncode == 0, result.stderr
     pose = json.loads((ws / "tracks" / "pose.json").read_text())
     assert [f["status"] for f in pose["frames"]] == ["absent", "absent", "init", "tracked"]
-    assert pose["frames"][2]["event"] == "init from the given pose"
+    # (Tracked back from frame 3 where that is clearly lower: `track_back`.)
+    assert pose["frames"][2]["event"].startswith("init from the given pose")
     assert pose["absent"] == [0, 1] and pose["lost"] == []
     assert [f["params"] is None for f in pose["frames"]] == [True, True, False, False]
     assert "absent     frames [0, 1]" in result.stdout
