@@ -467,6 +467,39 @@ the 1.92 m the hull's extent allowed; all 60 frames flagged unexplained), the 10
 unchanged; seed 0, all 15 clips unchanged (mean 9.3 mm: no crouched start won), and so
 were cartwheel and bend_pickup at seeds 1 and 2 (42.3/31.3 and 9.6/20.2 mm).
 
+Session 40, a 2-core Intel Xeon. The same code's figures differ from the AMD EPYC's of
+sessions 38-39 on some seed-0 clips (mean 10.8 mm here against 9.3: run 14.7 against 9.5,
+cartwheel 39.1 against 19.9, arms_overhead 7.7 against 8.3) and not on the frame-150 set's
+failures (cartwheel 54.9, bend_pickup 56.8, boxing 21.3 on both; mean 18.6 here). A start gone
+wrong that the track finds its way out of is tracked back (`SilhouetteTracker.track_back`,
+``--back-xor-factor`` 1.2, `tracker._BACK_GAIN` 0.1; the ``no-back`` tracker is without it):
+when the first frame's XOR is over 1.2 times the lowest of the opening's 24 frames, the
+frames before that one are tracked again backwards from it, in the shape pass (whose lengths
+then come from those poses) and in the track, and replace the forward ones where their XOR
+summed over them is 10% lower. Frame 150 on (12 clips): mean 18.6 -> **13.5 mm**, cartwheel
+54.9 -> **27.9**, bend_pickup 56.8 -> **44.3**, boxing 21.3 -> **5.9**, squat 14.5 -> 7.8, the
+other 8 unchanged to the 0.1 mm; none above 50 mm (met), frames over 100 mm unflagged 1 of 18
+-> 0 of 3; but the cartwheel, now 16-44 mm over frames 0-45, diverged at frame 46 (101-111 mm
+for 3 frames, each flagged) and recovered at 52, 6 frames later: **not met** by one frame
+(before: no divergence, 9 frames over 100 mm, flagged). Seed 0 (15 clips): unchanged to the
+0.1 mm. Seed 1 of walk, cartwheel, bend_pickup, squat and boxing against ``no-back`` in the
+same run: identical (7.6, 43.6, 9.6, 16.4, 6.2 mm). Pose2Sim demo: 100/100, median IoU 0.832
+(unchanged; its start is not tracked back). Speed, nothing beside, against ``no-back`` in the
+same run: walk 1.87 against 1.97 frames/s (its shape pass tracks 12 frames back and keeps
+none, 2 s), cartwheel 1.46 and 1.46, bend_pickup 1.27 and 1.27, turn_pirouette 1.19 and 1.17:
+the four slowest clips over 1 frame/s on this machine.
+The gain was set on the first 24 frames of those two sets (27 clips, both passes, run with
+each frame's lower sum kept): where the start had gone wrong, the backward track was 14-26%
+lower (the cartwheel, boxing, bend_pickup and squat from frame 150); elsewhere 0-6%. Without
+it the walk's shape pass took a backward track 1.7% lower and the walk went 7.8 -> 8.4 mm
+(dance 8.9 -> 9.4, wave 5.8 -> 5.1, squat 6.8 -> 7.1; frame 150: arms_overhead 12.7 -> 13.2,
+sit_stand 8.3 -> 7.8, climb_steps 11.2 -> 10.2). The first frame's XOR against the opening's
+lowest does not tell the two kinds apart (1.33-2.40 where the start had gone wrong, 1.20-1.44
+elsewhere): it only spares the tracking back where the first frame is near the lowest. Tried
+first and replaced: the track back run after the whole track (its frames logged twice in the
+recording), and without the shape pass (the cartwheel at frame 150 then 40.6 mm, its shape
+1.62 m, against 27.9 and 1.58 m).
+
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
 with one other job, so frames/s are low bounds). MPJPE (offsets out), worst joint, frames/s,
