@@ -1373,8 +1373,7 @@ class SilhouetteTracker:
         return result
 
     def track_back(self, results: Sequence[FrameResult],
-                   masks_of: Callable[[int], Sequence[np.ndarray]],
-                   progress: Callable[[], object] | None = None) -> dict[int, FrameResult]:
+                   masks_of: Callable[[int], Sequence[np.ndarray]]) -> dict[int, FrameResult]:
         """The opening of a track tracked again backwards: `results` (a sequence's, in frame
         order; `masks_of`: a frame's silhouettes), from the frame of lowest XOR among its first
         `shape_frames` (while each has a pose and is "init" or "tracked") back to the first,
@@ -1384,14 +1383,13 @@ class SilhouetteTracker:
         frame where the two's summed energies are lowest (one switch: both are continuous)
         to the anchor, where its XOR there is clearly lower (`_BACK_GAIN`). Returns the
         replacing results by index into `results` (the first keeps its status and says it
-        was tracked back). `progress`: called once per frame tracked back. What tracking a
-        frame changes of the tracker is as before after it (`_state_kept`): the track goes
-        on from its last frame.
+        was tracked back). What tracking a frame changes of the tracker is as before after
+        it (`_state_kept`): the track goes on from its last frame.
 
         Measured (`tracking_suite.py --start 150`, session 40): boxing's start held both arms
         in a guard in front of the chest, 220-390 mm off at XOR 17.7%, and the track found
-        them at frame 6; its shape pass tracked back from frame 20, and its first 20 frames
-        went from 92-104 mm to 4-12 (the clip 21.3 -> 5.8 mm)."""
+        them at frame 6; its shape pass tracked back from frame 20, and its first 6 frames
+        went from 92-104 mm to 6-12 (the clip 21.3 -> 5.9 mm)."""
         factor = self.config.back_xor_factor
         first = next((i for i, r in enumerate(results) if r.pose is not None), None)
         if factor <= 0 or first is None:
@@ -1413,8 +1411,6 @@ class SilhouetteTracker:
             self._lost_since, self._backwards = None, True
             for i in range(anchor - 1, first - 1, -1):
                 result = self.track(results[i].frame, masks_of(results[i].frame))
-                if progress is not None:
-                    progress()
                 if result.pose is None:
                     break
                 back[i] = result
