@@ -236,24 +236,28 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
             bar.close()
             warnings.extend(_short_shape_pass(config, shape_frames, tracker.shape_frames_used))
         bar = progress_bar(len(frames), "track", "frame", enabled=progress)
-        # The opening's frames are recorded once `track_back` has tracked them again or not.
+        # The opening's frames (their silhouettes kept, not read again) are recorded once
+        # `track_back` has tracked them again or not.
         opening_end = min(first + max(config.shape_frames, 1), len(frames)) - 1
+        opening: dict[int, list[np.ndarray]] = {}
         for index, frame in enumerate(frames):
             masks = masks_of(frame)
             result = tracker.track(frame, masks, init=init_pose if index == first else None)
             results.append(result)
             if index > opening_end:
                 recorder.frame(tracker, result, masks)
+            else:
+                opening[frame] = masks
             bar.set_postfix_str(f"XOR {result.xor_fraction:.0%} {result.event}"[:40])
             bar.update()
             if index == opening_end:
                 # A start gone wrong that the track found its way out of: tracked again,
                 # backwards, from the opening's frame of lowest XOR.
                 bar.set_postfix_str("the opening again, backwards")
-                for i, again in tracker.track_back(results, masks_of).items():
+                for i, again in tracker.track_back(results, opening.__getitem__).items():
                     results[i] = again
                 for r in results:
-                    recorder.frame(tracker, r, masks_of(r.frame))
+                    recorder.frame(tracker, r, opening.pop(r.frame))
         bar.close()
     if tracker.model is None or all(r.pose is None for r in results):
         reasons = sorted({r.event.removeprefix("lost: ") for r in results})

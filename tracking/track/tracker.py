@@ -1369,7 +1369,7 @@ class SilhouetteTracker:
                          f"at frame {back[0]}), with the visual hull explained")
                 result = dataclasses.replace(
                     result, status="recovered",
-                    event="; ".join(part for part in (event, result.event) if part))
+                    event=_events(event, result.event))
         return result
 
     def track_back(self, results: Sequence[FrameResult],
@@ -1422,21 +1422,19 @@ class SilhouetteTracker:
                     for s in range(min(back), anchor + 1)}  # fmt: skip
         switch = min(energies, key=energies.__getitem__)
         forward = sum(results[i].energy for i in range(switch, anchor))
-        if switch == anchor or energies[switch] - energies[anchor] > -_BACK_GAIN * forward:
+        backward = sum(back[i].energy for i in range(switch, anchor))
+        if switch == anchor or backward > (1 - _BACK_GAIN) * forward:
             return {}  # not clearly lower: the forward track stays
         replaced = {i: back[i] for i in range(switch, anchor)}
+        origin = f"frame {results[anchor].frame}"
         if switch > first:  # the two tracks meet here: say so
-            said = f"the track back from frame {results[anchor].frame} starts here"
-            replaced[switch] = dataclasses.replace(
-                back[switch], event="; ".join(part for part in (said, back[switch].event)
-                                              if part))  # fmt: skip
+            replaced[switch] = dataclasses.replace(back[switch], event=_events(
+                f"the track back from {origin} starts here", back[switch].event))
         if first in replaced:
             start = results[first]
-            said = f"tracked back from frame {results[anchor].frame}"
             replaced[first] = dataclasses.replace(
                 replaced[first], status=start.status,
-                event="; ".join(part for part in (start.event, said, replaced[first].event)
-                                if part))  # fmt: skip
+                event=_events(start.event, f"tracked back from {origin}", replaced[first].event))
         return replaced
 
     @contextmanager
@@ -1712,7 +1710,7 @@ class SilhouetteTracker:
             self._last_good = (frame, x.copy())
         self._lost_since, self._gap_statuses, self._tracked_any = None, set(), True
         self.history = [*self.history[-1:], x]
-        event = "; ".join(part for part in (event, mended) if part)
+        event = _events(event, mended)
         return FrameResult(frame, Pose(x), e, area, self.evaluations,
                            time.perf_counter() - start, event, status)  # fmt: skip
 
@@ -1761,6 +1759,11 @@ class SilhouetteTracker:
         # A recovered pose has no velocity; the tracked one keeps its own.
         self.history = history if found is None else []
         return best_x, best_e, found
+
+
+def _events(*parts: str) -> str:
+    """A frame's event of several parts, the empty ones left out."""
+    return "; ".join(part for part in parts if part)
 
 
 _BACK_GAIN = 0.1

@@ -425,12 +425,13 @@ def _z_up_walk(tmp_path, frames: int):
     return ws
 
 
-def _joint_errors(ws) -> tuple[list[dict], list[float]]:
-    """tracks/joints.csv's rows and their distances (m) to the truth, in the Z-up world."""
+def _joint_errors(ws, world_from_truth=WORLD_FROM_YUP) -> tuple[list[dict], list[float]]:
+    """tracks/joints.csv's rows and their distances (m) to the truth (gt/joints.csv, turned
+    by `world_from_truth`: by default into the Z-up world)."""
     with (ws / "tracks" / "joints.csv").open() as handle:
         rows = list(csv.DictReader(handle))
     with (ws / "gt" / "joints.csv").open() as handle:
-        truth = {(r["frame"], r["joint"]): WORLD_FROM_YUP @ [float(r[k]) for k in "xyz"]
+        truth = {(r["frame"], r["joint"]): world_from_truth @ [float(r[k]) for k in "xyz"]
                  for r in csv.DictReader(handle)}  # fmt: skip
     return rows, [float(np.linalg.norm(np.array([float(r[k]) for k in "xyz"])
                                        - truth[r["frame"], r["joint"]])) for r in rows]
@@ -472,17 +473,12 @@ def test_cli_synth_then_track_writes_every_output(tmp_path):
 
 
 def _frame_errors_mm(ws) -> dict[int, float]:
-    """Per frame, the mean distance (mm) of tracks/joints.csv's joints to gt/joints.csv's."""
-    def read(path):
-        with path.open() as handle:
-            return {(int(r["frame"]), r["joint"]): np.array([float(r[k]) for k in "xyz"])
-                    for r in csv.DictReader(handle)}  # fmt: skip
-
-    tracked, truth = read(ws / "tracks" / "joints.csv"), read(ws / "gt" / "joints.csv")
-    frames = sorted({f for f, _ in tracked})
-    return {f: 1000 * float(np.mean([np.linalg.norm(xyz - truth[key])
-                                     for key, xyz in tracked.items() if key[0] == f]))
-            for f in frames}  # fmt: skip
+    """Per frame, the mean distance (mm) of tracks/joints.csv's joints to gt/joints.csv's
+    (`_joint_errors` in the workspace's own world)."""
+    rows, errors = _joint_errors(ws, np.eye(3))
+    frames = [int(r["frame"]) for r in rows]
+    return {f: 1000 * float(np.mean([e for g, e in zip(frames, errors, strict=True) if g == f]))
+            for f in sorted(set(frames))}  # fmt: skip
 
 
 @pytest.mark.slow  # two tracks of 24 frames at 640x480: 100 s
