@@ -236,28 +236,34 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
             bar.close()
             warnings.extend(_short_shape_pass(config, shape_frames, tracker.shape_frames_used))
         bar = progress_bar(len(frames), "track", "frame", enabled=progress)
-        # The opening's frames (their silhouettes kept, not read again) are recorded once
-        # `track_back` has tracked them again or not.
-        opening_end = min(first + max(config.shape_frames, 1), len(frames)) - 1
-        opening: dict[int, list[np.ndarray]] = {}
+        # The frames a track back may still replace (the opening, `track_back`; a divergence
+        # or loss a later frame recovers from, `track_back_gap`: the last `back_frames`) are
+        # held, their silhouettes kept, and recorded once it can no longer reach them: once.
+        opening_end = min(first + tracker.back_frames, len(frames)) - 1
+        held: dict[int, list[np.ndarray]] = {}  # frame -> its silhouettes, not yet recorded
+        recorded = 0  # results[:recorded] are in the recording
         for index, frame in enumerate(frames):
             masks = masks_of(frame)
             result = tracker.track(frame, masks, init=init_pose if index == first else None)
             results.append(result)
-            if index > opening_end:
-                recorder.frame(tracker, result, masks)
-            else:
-                opening[frame] = masks
+            held[frame] = masks
             bar.set_postfix_str(f"XOR {result.xor_fraction:.0%} {result.event}"[:40])
             bar.update()
+            if result.status == "recovered":
+                bar.set_postfix_str("tracking back from the recovery")
+            for i, again in tracker.track_back_gap(results, held.__getitem__).items():
+                results[i] = again
             if index == opening_end:
                 # A start gone wrong that the track found its way out of: tracked again,
                 # backwards, from the opening's frame of lowest XOR.
                 bar.set_postfix_str("the opening again, backwards")
-                for i, again in tracker.track_back(results, opening.__getitem__).items():
+                for i, again in tracker.track_back(results, held.__getitem__).items():
                     results[i] = again
-                for r in results:
-                    recorder.frame(tracker, r, opening.pop(r.frame))
+            while recorded < len(results) - tracker.back_frames:
+                recorder.frame(tracker, results[recorded], held.pop(results[recorded].frame))
+                recorded += 1
+        for r in results[recorded:]:
+            recorder.frame(tracker, r, held.pop(r.frame))
         bar.close()
     if tracker.model is None or all(r.pose is None for r in results):
         reasons = sorted({r.event.removeprefix("lost: ") for r in results})

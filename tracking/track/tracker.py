@@ -404,8 +404,9 @@ class TrackConfig:
         metadata={"help": "the opening of a track (its first --shape-frames frames) is "
                   "tracked again backwards, from its frame of lowest XOR, when its first "
                   "frame's XOR is over this factor times that (a start gone wrong that the "
-                  "track found its way out of), in the shape pass too; the frames tracked "
-                  "back replace the others where their XOR is clearly lower (0 = off)"},
+                  "track found its way out of), in the shape pass too; so is a divergence "
+                  "or loss, from the frame that recovers from it; the frames tracked back "
+                  "replace the others where their XOR is clearly lower (0 = off)"},
     )  # fmt: skip
     init_headings: int = field(
         default=8,
@@ -1359,8 +1360,8 @@ class SilhouetteTracker:
             share = self.unexplained_share(masks, result.pose)
             result = dataclasses.replace(result, unexplained_share=share,
                                          unexplained=share > limit)
-            back = (self.watch.returned(result.xor_fraction)
-                    if result.status == "tracked" and not result.unexplained else None)
+            back = (self.watch.returned(result.xor_fraction) if result.status == "tracked"
+                    and not result.unexplained and not self._backwards else None)
             if back is not None:
                 # The track found again after a divergence the start search found nothing
                 # better for: back to this subject's usual XOR, and the hull explained.
@@ -1379,12 +1380,9 @@ class SilhouetteTracker:
         `shape_frames` (while each has a pose and is "init" or "tracked") back to the first,
         when the first's XOR is over `back_xor_factor` times that. A start that went wrong
         and that the track found its way out of (the limbs' search, the mend) is then found
-        from the frames after it. The backward track replaces the forward one from the
-        frame where the two's summed energies are lowest (one switch: both are continuous)
-        to the anchor, where its XOR there is clearly lower (`_BACK_GAIN`). Returns the
-        replacing results by index into `results` (the first keeps its status and says it
-        was tracked back). What tracking a frame changes of the tracker is as before after
-        it (`_state_kept`): the track goes on from its last frame.
+        from the frames after it. The backward track replaces the forward one where it is
+        clearly lower (`_tracked_back`). Returns the replacing results by index into
+        `results` (the first keeps its status and says it was tracked back).
 
         Measured (`tracking_suite.py --start 150`, session 40): boxing's start held both arms
         in a guard in front of the chest, 220-390 mm off at XOR 17.7%, and the track found
@@ -1395,7 +1393,7 @@ class SilhouetteTracker:
         if factor <= 0 or first is None:
             return {}
         opening = []
-        for i in range(first, min(first + max(self.config.shape_frames, 1), len(results))):
+        for i in range(first, min(first + self.back_frames, len(results))):
             if results[i].pose is None or results[i].status not in ("init", "tracked"):
                 break
             opening.append(i)
@@ -1403,39 +1401,112 @@ class SilhouetteTracker:
         anchor = opening[int(np.argmin(xor))]
         if anchor == first or xor[0] <= factor * min(xor):
             return {}
-        back: dict[int, FrameResult] = {}
-        with self._state_kept():
-            # The prediction runs backwards: the frame after the anchor, then the anchor.
-            self.history = [results[i].pose.params.copy() for i in (anchor + 1, anchor)
-                            if i < len(results) and results[i].pose is not None]
-            self._lost_since, self._backwards = None, True
-            for i in range(anchor - 1, first - 1, -1):
-                result = self.track(results[i].frame, masks_of(results[i].frame))
-                if result.pose is None:
-                    break
-                back[i] = result
-        if not back:
-            return {}
-        # Backwards from `switch` to the anchor, forwards before it: the lowest sum.
-        energies = {s: sum(results[i].energy for i in range(first, s))
-                    + sum(back[i].energy for i in range(s, anchor))
-                    for s in range(min(back), anchor + 1)}  # fmt: skip
-        switch = min(energies, key=energies.__getitem__)
-        forward = sum(results[i].energy for i in range(switch, anchor))
-        backward = sum(back[i].energy for i in range(switch, anchor))
-        if switch == anchor or backward > (1 - _BACK_GAIN) * forward:
-            return {}  # not clearly lower: the forward track stays
-        replaced = {i: back[i] for i in range(switch, anchor)}
+        switch, replaced = self._tracked_back(results, masks_of, first, anchor)
         origin = f"frame {results[anchor].frame}"
-        if switch > first:  # the two tracks meet here: say so
-            replaced[switch] = dataclasses.replace(back[switch], event=_events(
-                f"the track back from {origin} starts here", back[switch].event))
+        if replaced and switch > first:  # the two tracks meet here: say so
+            replaced[switch] = dataclasses.replace(replaced[switch], event=_events(
+                f"the track back from {origin} starts here", replaced[switch].event))
         if first in replaced:
             start = results[first]
             replaced[first] = dataclasses.replace(
                 replaced[first], status=start.status,
                 event=_events(start.event, f"tracked back from {origin}", replaced[first].event))
         return replaced
+
+    def track_back_gap(self, results: Sequence[FrameResult],
+                       masks_of: Callable[[int], Sequence[np.ndarray]]
+                       ) -> dict[int, FrameResult]:  # fmt: skip
+        """The frames before a recovery (the last of `results`) tracked again backwards from
+        it (`_gap`): those of the divergence or loss it recovered from (the forward track held
+        them wrong, or had no pose for them), then on while lower (the track slid before it
+        diverged: the watch's high bar is for several frames in a row, and a divergence the
+        search recovers from at once has no diverged frame), within `back_frames`. Replaced as
+        in `track_back` (`_tracked_back`: the lowest summed energies, a frame without a pose
+        counting infinite; clearly lower by `_BACK_GAIN`). The first frame replaced is then
+        "recovered", by the track back, or "tracked" where the forward track was not yet
+        diverged or lost; the last of `results` keeps its own status. Returns the replacing
+        results by index into `results`, as `track_back`; nothing when off (`back_xor_factor`
+        0)."""
+        anchor = len(results) - 1
+        if (self.config.back_xor_factor <= 0 or anchor < 1 or results[anchor].pose is None
+                or results[anchor].status != "recovered"):  # fmt: skip
+            return {}
+        reach, first = self._gap(results[:anchor])
+        needed = anchor if first is None else max(first, reach)
+        switch, replaced = self._tracked_back(results, masks_of, needed, anchor, reach)
+        if replaced:
+            what = f"the track back from frame {results[anchor].frame}" + (
+                "" if first is None else
+                f" over the {results[first].status} frames from {results[first].frame}")
+            replaced[switch] = dataclasses.replace(
+                replaced[switch], status="recovered" if switch >= needed else "tracked",
+                event=_events(f"recovered by {what}" if switch >= needed else
+                              f"{what} starts here", replaced[switch].event))
+        return replaced
+
+    @property
+    def back_frames(self) -> int:
+        """The frames a track back spans (`track_back`, `track_back_gap`), the one it starts
+        from included: `mocap track` holds the last this many frames' silhouettes, and records
+        them once no track back can replace them."""
+        return max(self.config.shape_frames, 1)
+
+    def _gap(self, results: Sequence[FrameResult]) -> tuple[int, int | None]:
+        """What a recovery in the frame after `results` tracks back over: the index of the first
+        frame after the last start or recovery (or absent or two-subjects frame, which no track
+        reaches), within `back_frames` of the recovery, and that of the first "diverged" or
+        "lost" frame since (None: none)."""
+        start, first = len(results), None
+        for i in range(len(results) - 1, -1, -1):
+            status = results[i].status
+            if status in ("init", "recovered", "absent", "two-subjects"):
+                break
+            start = i
+            if status in ("diverged", "lost"):
+                first = i
+        return max(start, len(results) + 1 - self.back_frames), first
+
+    def _tracked_back(self, results: Sequence[FrameResult],
+                      masks_of: Callable[[int], Sequence[np.ndarray]], first: int, anchor: int,
+                      before: int | None = None) -> tuple[int, dict[int, FrameResult]]:
+        """`results`' frames from `anchor` - 1 back to `first` tracked again, backwards, from
+        the anchor's pose (the prediction runs from the frame after it, when there is one, then
+        the anchor), while each is "tracked" (under the absolute bar: backwards, a divergence
+        ends it, no search); then on to `before` while each is lower than the forward one
+        (once it is not, the two tracks have met). The backward track replaces the forward
+        one from the frame where the two's summed energies are lowest (one switch: both are
+        continuous; a frame without a pose counts infinite) to the anchor, where its XOR there
+        is clearly lower (`_BACK_GAIN`). Returns the switch and the replacing results by index
+        (none: the forward track stays). What tracking a frame changes of the tracker is as
+        before after it (`_state_kept`): the track goes on from its last frame."""
+
+        def forward(i: int) -> float:
+            return results[i].energy if results[i].pose is not None else np.inf
+
+        back: dict[int, FrameResult] = {}
+        with self._state_kept():
+            self.history = [results[i].pose.params.copy() for i in (anchor + 1, anchor)
+                            if i < len(results) and results[i].pose is not None]
+            self._lost_since, self._backwards = None, True
+            last = first if before is None else min(first, before)
+            for i in range(anchor - 1, last - 1, -1):
+                result = self.track(results[i].frame, masks_of(results[i].frame))
+                if (result.pose is None or result.status != "tracked"
+                        or (i < first and result.energy >= forward(i))):  # fmt: skip
+                    break
+                back[i] = result
+        if not back:
+            return anchor, {}
+        # Backwards from `switch` to the anchor, forwards before it: the lowest sum.
+        energies = {s: sum(forward(i) for i in range(min(back), s))
+                    + sum(back[i].energy for i in range(s, anchor))
+                    for s in range(min(back), anchor + 1)}  # fmt: skip
+        switch = min(energies, key=energies.__getitem__)
+        ahead = sum(forward(i) for i in range(switch, anchor))
+        behind = sum(back[i].energy for i in range(switch, anchor))
+        if switch == anchor or behind > (1 - _BACK_GAIN) * ahead:
+            return anchor, {}  # not clearly lower: the forward track stays
+        return switch, {i: back[i] for i in range(switch, anchor)}
 
     @contextmanager
     def _state_kept(self) -> Iterator[None]:
@@ -1643,7 +1714,10 @@ class SilhouetteTracker:
                     # The shape pass's model is not the subject's yet; a track backwards
                     # has no recent frames of its own.
                     why = self.watch.verdict(e / area)
-            if why:
+            if why and self._backwards:
+                # Backwards (`_tracked_back`), a divergence ends the track back: no search.
+                status, event = "diverged", f"diverged: {why}"
+            elif why:
                 # A second subject makes a divergence (its silhouettes are unexplained): say
                 # so, and track no merged blob. Else the start search again, from the last
                 # good pose and the hull.

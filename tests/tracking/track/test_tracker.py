@@ -30,6 +30,7 @@ from tracking.rig.cameras import read_cameras, ring_cameras
 from tracking.silhouettes.hull import hull_diameter
 from tracking.track.render import CpuRasterRenderer
 from tracking.track.tracker import (
+    STATUSES,
     FrameResult,
     SilhouetteTracker,
     TrackConfig,
@@ -504,6 +505,33 @@ def test_a_start_gone_wrong_is_tracked_back_from_the_frames_after_it(tmp_path):
     assert "tracked back" in pose["frames"][0]["event"]
 
 
+@pytest.mark.slow  # a track of 53 frames at 640x480: about 90 s
+@pytest.mark.shared_data
+def test_the_cartwheels_divergence_is_tracked_back_from_its_recovery(tmp_path):
+    """The motion suite's cartwheel from clip frame 150 (`tracking_suite.py --start 150`):
+    forwards, the track slides from frame 34 (XOR 13.9% -> 20.8% at 45, 44 mm), diverges at
+    frame 46 (101-111 mm at 46-48, 52-61 mm at 49-51) and finds the subject again at 52 (24
+    mm). Tracked back from 52, the frames from 29 on replace it: each under 30 mm, none
+    diverged. The recording holds each frame once, with its final status."""
+    from tests.helpers import read_recording
+
+    ws = tmp_path / "cartwheel"
+    made = run_cli("synth", ws, "--bvh", shared_dataset("mocap_bvh") / "cmu_cartwheel.bvh",
+                   "--frames", "60", "--first-frame", "150")  # fmt: skip
+    assert made.returncode == 0, made.stderr
+    result = run_cli("track", ws, "--last", "52")
+    assert result.returncode == 0, result.stderr
+    errors = _frame_errors_mm(ws)
+    assert max(errors[f] for f in range(40, 52)) < 30, errors
+    pose = json.loads((ws / "tracks" / "pose.json").read_text())
+    assert pose["diverged"] == [] and pose["recovered"] == [52], pose["recovered"]
+    assert "the track back from frame 52 over the diverged frames from 46 starts here" in [
+        f["event"] for f in pose["frames"]]
+    read = read_recording(ws / "logs" / "track.rrd")
+    assert read.rows("track/status_index", "frame") == list(range(53))
+    assert read.rows("track/status_index", "Scalars:scalars")[46] == [STATUSES.index("tracked")]
+
+
 @pytest.mark.shared_data
 def test_cli_track_from_a_given_pose_in_another_frame(tmp_path):
     """--init-pose FILE: a pose file in the world frame of a Z-up rig (world_from_upright the
@@ -637,6 +665,129 @@ def test_no_track_back_when_off_or_the_first_frame_is_near_the_lowest(factor):
     tracker, seen = SilhouetteTracker(CAMERAS, config), []
     results = _opening([30, 28, 26, 20, 12, 10, 11], tracker, {}, seen)
     assert tracker.track_back(results, lambda frame: [frame]) == {} and seen == []
+
+
+def _gap(statuses, energies, tracker, backwards, seen):
+    """`_opening`'s stand-ins for `track_back_gap`: the forward results of `statuses` and
+    `energies` (a frame of energy None has no pose), the last one recovered."""
+    results = _opening([e if e is not None else 50 for e in energies], tracker, backwards, seen)
+    return [dataclasses.replace(r, status=s, **({} if e is not None else
+                                                {"pose": None, "energy": float("nan")}))
+            for r, s, e in zip(results, statuses, energies, strict=True)]  # fmt: skip
+
+
+GAP = ["init", "tracked", "tracked", "tracked", "tracked", "diverged", "tracked", "tracked",
+       "recovered", "tracked"]
+"""A divergence at frame 5, recovered at frame 8 (the results end with frame 8 but for the
+last test: a frame 9 after the recovery)."""
+
+
+def test_a_divergence_is_tracked_back_from_the_frame_that_recovers_from_it():
+    """Diverged at frame 5 (30% XOR), 6 and 7 high, recovered at 8: frames 7 to 5 are tracked
+    again backwards from 8 (the prediction from 8 alone: no frame after it yet), lower, and
+    replace the forward ones; frame 4's backward track is no lower than its forward one (the
+    two tracks have met) and ends the track back. Frame 5 is then "recovered", by the track
+    back; frame 8 keeps its status."""
+    tracker, seen = SilhouetteTracker(CAMERAS, SUPERQUADRIC), []
+    results = _gap(GAP[:9], [10, 10, 11, 12, 13, 30, 31, 29, 12], tracker,
+                   {7: 12, 6: 12, 5: 12, 4: 13}, seen)
+    back = tracker.track_back_gap(results, lambda frame: [frame])
+    assert [s[0] for s in seen] == [7, 6, 5, 4] and seen[0][1] == [8]
+    assert all(s[2] for s in seen) and not tracker._backwards
+    assert sorted(back) == [5, 6, 7] and all(back[f].pose.params[0] == 100 + f for f in back)
+    assert back[5].status == "recovered" and back[6].status == "tracked"
+    assert back[5].event == ("recovered by the track back from frame 8 over the diverged "
+                             "frames from 5")
+
+
+def test_a_track_back_from_a_recovery_goes_on_before_the_divergence_while_lower():
+    """The forward track slid before its divergence at frame 5 (frames 2-4 high but under the
+    bars): backwards, they are lower too, and the track back replaces them, from frame 2
+    (frame 1: no lower, the two tracks met). No frame of the divergence is left: frame 2 is
+    "tracked", and says where the track back starts."""
+    tracker, seen = SilhouetteTracker(CAMERAS, SUPERQUADRIC), []
+    results = _gap(GAP[:9], [10, 10, 20, 22, 25, 30, 31, 29, 12], tracker,
+                   {7: 12, 6: 12, 5: 12, 4: 12, 3: 11, 2: 11, 1: 10}, seen)
+    back = tracker.track_back_gap(results, lambda frame: [frame])
+    assert [s[0] for s in seen] == [7, 6, 5, 4, 3, 2, 1] and sorted(back) == [2, 3, 4, 5, 6, 7]
+    assert back[2].status == "tracked" and back[5].status == "tracked"
+    assert back[2].event == ("the track back from frame 8 over the diverged frames from 5 "
+                             "starts here")
+
+
+def test_a_track_back_from_a_recovery_gives_lost_frames_a_pose():
+    """Frames 5 and 6 lost (no pose), 7 recovered after them, as the start search found
+    nothing under the bar there: tracked back from 7 under the bar, they get poses, and 5 is
+    "recovered"."""
+    tracker, seen = SilhouetteTracker(CAMERAS, SUPERQUADRIC), []
+    statuses = ["init", "tracked", "tracked", "tracked", "tracked", "lost", "lost", "recovered"]
+    results = _gap(statuses, [10, 10, 11, 12, 13, None, None, 12], tracker,
+                   {6: 14, 5: 14, 4: 14}, seen)
+    back = tracker.track_back_gap(results, lambda frame: [frame])
+    assert sorted(back) == [5, 6] and back[5].status == "recovered"
+    assert back[5].event.endswith("over the lost frames from 5")
+
+
+def test_a_track_back_from_a_recovery_ends_where_it_diverges_itself():
+    """Backwards, frame 6 is over the bars (a divergence: no search while tracking back), and
+    the track back ends there: frame 7 alone is replaced, and says the recovery starts
+    there."""
+    tracker, seen = SilhouetteTracker(CAMERAS, SUPERQUADRIC), []
+    results = _gap(GAP[:9], [10, 10, 11, 12, 13, 30, 31, 29, 12], tracker,
+                   {7: 12, 6: 12, 5: 12}, seen)
+    track = tracker.track
+
+    def diverging(frame, masks, init=None):
+        result = track(frame, masks, init)
+        return dataclasses.replace(result, status="diverged") if frame == 6 else result
+
+    tracker.track = diverging
+    back = tracker.track_back_gap(results, lambda frame: [frame])
+    assert [s[0] for s in seen] == [7, 6] and sorted(back) == [7]
+    assert back[7].status == "recovered"
+
+
+def test_a_track_back_from_a_recovery_reaches_back_frames_only():
+    """A divergence further back than `back_frames` (3 here): the track back from frame 8
+    replaces frames 7 and 6 alone (the divergence's later frames: a divergence stays open
+    while no frame recovers from it), and 6 is "recovered", naming frame 5."""
+    tracker, seen = SilhouetteTracker(CAMERAS, dataclasses.replace(SUPERQUADRIC,
+                                                                   shape_frames=3)), []
+    results = _gap(GAP[:9], [10, 10, 11, 12, 13, 30, 31, 29, 12], tracker,
+                   {7: 12, 6: 12, 5: 12}, seen)
+    back = tracker.track_back_gap(results, lambda frame: [frame])
+    assert [s[0] for s in seen] == [7, 6] and sorted(back) == [6, 7]
+    assert back[6].status == "recovered" and back[6].event.endswith("diverged frames from 5")
+
+
+def test_a_recovery_without_diverged_frames_before_it_tracks_back_while_lower():
+    """A divergence the start search recovered from at once (frame 8 "recovered", no diverged
+    frame before it) after a slide (frames 5-7 high): tracked back from 8 while lower, frames
+    7 to 5 are replaced, and frame 4 (no lower) ends the track back. Frame 5 is "tracked", and
+    says where the track back starts; a divergence behind a recovery (frame 3's) is not
+    reached."""
+    tracker, seen = SilhouetteTracker(CAMERAS, SUPERQUADRIC), []
+    statuses = ["init", "tracked", "diverged", "recovered", "tracked", "tracked", "tracked",
+                "tracked", "recovered"]
+    results = _gap(statuses, [10, 10, 30, 11, 13, 20, 22, 25, 12], tracker,
+                   {7: 12, 6: 12, 5: 12, 4: 14}, seen)
+    back = tracker.track_back_gap(results, lambda frame: [frame])
+    assert [s[0] for s in seen] == [7, 6, 5, 4] and sorted(back) == [5, 6, 7]
+    assert back[5].status == "tracked"
+    assert back[5].event == "the track back from frame 8 starts here"
+
+
+@pytest.mark.parametrize("case", ["off", "not recovered"])
+def test_no_track_back_from_a_recovery_when_off_or_after_it(case):
+    """Nothing is tracked back: off (--back-xor-factor 0); the last frame not a recovery (a
+    frame after it)."""
+    config = (dataclasses.replace(SUPERQUADRIC, back_xor_factor=0.0) if case == "off"
+              else SUPERQUADRIC)  # fmt: skip
+    tracker, seen = SilhouetteTracker(CAMERAS, config), []
+    statuses = GAP if case == "not recovered" else GAP[:9]
+    energies = [10, 10, 11, 12, 13, 30, 31, 29, 12, 12][:len(statuses)]
+    results = _gap(statuses, energies, tracker, {}, seen)
+    assert tracker.track_back_gap(results, lambda frame: [frame]) == {} and seen == []
 
 
 def test_the_shape_pass_refines_the_shape_on_the_poses_tracked_back(monkeypatch):
