@@ -71,6 +71,12 @@ pose, rather than a fit to the merged blob. It is looked for where a second subj
 a start from the hull, and on a divergence before the start search (the other subject's
 silhouettes are unexplained, so the XOR jumps).
 
+A track runs forwards, so a start gone wrong or a divergence is found only by the frames after
+it. Both are tracked again backwards from there (`track_back`: the opening of a track, from its
+frame of lowest XOR; `track_back_gap`: the frames before a recovery, from the recovered pose),
+and the backward track replaces the forward one where its XOR is clearly lower. The first frame
+it replaces in a divergence or loss is then "recovered".
+
 The search ranges scale with the frame interval (`frame_interval_s`, seconds), not with the
 frame index: a limb grid's half-range is `range_gain` times the change over the two preceding
 frames (which scales with the interval by itself), clipped to angular speeds
@@ -550,7 +556,8 @@ class FrameResult:
     """One of `STATUSES`: "init" (a start), "tracked", "recovered" (a divergence, or the first
     frame after lost or absent ones, found again by the start search; or, after a "diverged"
     frame, the first tracked frame back under the XOR bar of before it, with the visual hull
-    explained: `XorWatch.returned`), "diverged" (a
+    explained: `XorWatch.returned`; or the first diverged or lost frame that a track back from
+    a later recovery replaced, `SilhouetteTracker.track_back_gap`), "diverged" (a
     divergence the search found nothing better for: the best pose is kept, not trusted),
     "lost" (no pose), "absent" (no pose: no camera has a silhouette, the subject is out of
     view) or "two-subjects" (no pose: the visual hull has two or more separate parts of human
@@ -1426,11 +1433,14 @@ class SilhouetteTracker:
         "recovered", by the track back, or "tracked" where the forward track was not yet
         diverged or lost; the last of `results` keeps its own status. Returns the replacing
         results by index into `results`, as `track_back`; nothing when off (`back_xor_factor`
-        0)."""
+        0) or when the recovered pose leaves a part of the visual hull out (a limb likely
+        misplaced: the suite's cartwheel recovered from the hull at frame 27 at 50 mm, and
+        its frames 23-26 tracked back from there went from 24-46 to 41-43 mm at a lower
+        XOR)."""
         anchor = len(results) - 1
         if (self.config.back_xor_factor <= 0 or anchor < 1 or results[anchor].pose is None
-                or results[anchor].status != "recovered"):  # fmt: skip
-            return {}
+                or results[anchor].status != "recovered" or results[anchor].unexplained):
+            return {}  # (a recovered pose that leaves a part of the hull out: not trusted)
         reach, first = self._gap(results[:anchor])
         needed = anchor if first is None else max(first, reach)
         switch, replaced = self._tracked_back(results, masks_of, needed, anchor, reach)
@@ -1472,13 +1482,14 @@ class SilhouetteTracker:
         """`results`' frames from `anchor` - 1 back to `first` tracked again, backwards, from
         the anchor's pose (the prediction runs from the frame after it, when there is one, then
         the anchor), while each is "tracked" (under the absolute bar: backwards, a divergence
-        ends it, no search); then on to `before` while each is lower than the forward one
-        (once it is not, the two tracks have met). The backward track replaces the forward
-        one from the frame where the two's summed energies are lowest (one switch: both are
-        continuous; a frame without a pose counts infinite) to the anchor, where its XOR there
-        is clearly lower (`_BACK_GAIN`). Returns the switch and the replacing results by index
-        (none: the forward track stays). What tracking a frame changes of the tracker is as
-        before after it (`_state_kept`): the track goes on from its last frame."""
+        ends it, no search) and leaves no part of the visual hull out where the forward one
+        did not (`FrameResult.unexplained`); then on to `before` while each is lower than the
+        forward one (once it is not, the two tracks have met). The backward track replaces
+        the forward one from the frame where the two's summed energies are lowest (one switch:
+        both are continuous; a frame without a pose counts infinite) to the anchor, where its
+        XOR there is clearly lower (`_BACK_GAIN`). Returns the switch and the replacing results
+        by index (none: the forward track stays). What tracking a frame changes of the tracker
+        is as before after it (`_state_kept`): the track goes on from its last frame."""
 
         def forward(i: int) -> float:
             return results[i].energy if results[i].pose is not None else np.inf
@@ -1492,6 +1503,7 @@ class SilhouetteTracker:
             for i in range(anchor - 1, last - 1, -1):
                 result = self.track(results[i].frame, masks_of(results[i].frame))
                 if (result.pose is None or result.status != "tracked"
+                        or (result.unexplained and not results[i].unexplained)
                         or (i < first and result.energy >= forward(i))):  # fmt: skip
                     break
                 back[i] = result

@@ -728,10 +728,11 @@ def test_a_track_back_from_a_recovery_gives_lost_frames_a_pose():
     assert back[5].event.endswith("over the lost frames from 5")
 
 
-def test_a_track_back_from_a_recovery_ends_where_it_diverges_itself():
-    """Backwards, frame 6 is over the bars (a divergence: no search while tracking back), and
-    the track back ends there: frame 7 alone is replaced, and says the recovery starts
-    there."""
+@pytest.mark.parametrize("wrong", [{"status": "diverged"}, {"unexplained": True}])
+def test_a_track_back_from_a_recovery_ends_where_it_goes_wrong_itself(wrong):
+    """Backwards, frame 6 is over the bars (a divergence: no search while tracking back), or
+    leaves a part of the visual hull out where the forward frame did not, and the track back
+    ends there: frame 7 alone is replaced, and says the recovery starts there."""
     tracker, seen = SilhouetteTracker(CAMERAS, SUPERQUADRIC), []
     results = _gap(GAP[:9], [10, 10, 11, 12, 13, 30, 31, 29, 12], tracker,
                    {7: 12, 6: 12, 5: 12}, seen)
@@ -739,7 +740,7 @@ def test_a_track_back_from_a_recovery_ends_where_it_diverges_itself():
 
     def diverging(frame, masks, init=None):
         result = track(frame, masks, init)
-        return dataclasses.replace(result, status="diverged") if frame == 6 else result
+        return dataclasses.replace(result, **wrong) if frame == 6 else result
 
     tracker.track = diverging
     back = tracker.track_back_gap(results, lambda frame: [frame])
@@ -777,16 +778,18 @@ def test_a_recovery_without_diverged_frames_before_it_tracks_back_while_lower():
     assert back[5].event == "the track back from frame 8 starts here"
 
 
-@pytest.mark.parametrize("case", ["off", "not recovered"])
-def test_no_track_back_from_a_recovery_when_off_or_after_it(case):
+@pytest.mark.parametrize("case", ["off", "not recovered", "unexplained"])
+def test_no_track_back_from_a_recovery_when_off_after_it_or_not_trusted(case):
     """Nothing is tracked back: off (--back-xor-factor 0); the last frame not a recovery (a
-    frame after it)."""
+    frame after it); a recovered pose that leaves a part of the visual hull out."""
     config = (dataclasses.replace(SUPERQUADRIC, back_xor_factor=0.0) if case == "off"
               else SUPERQUADRIC)  # fmt: skip
     tracker, seen = SilhouetteTracker(CAMERAS, config), []
     statuses = GAP if case == "not recovered" else GAP[:9]
     energies = [10, 10, 11, 12, 13, 30, 31, 29, 12, 12][:len(statuses)]
     results = _gap(statuses, energies, tracker, {}, seen)
+    if case == "unexplained":
+        results[8] = dataclasses.replace(results[8], unexplained=True)
     assert tracker.track_back_gap(results, lambda frame: [frame]) == {} and seen == []
 
 
