@@ -107,7 +107,9 @@ class TrackCommand:
               f"XOR {summary['median_xor_fraction']:.1%} of the silhouette; "
               f"{summary['seconds_per_frame']:.2f} s/frame"
               + (f" (start and shape pass {summary['shape_pass_seconds']:.0f} s, then "
-                 f"{summary['tracking_seconds_per_frame']:.2f} s/frame)"
+                 f"{summary['tracking_seconds_per_frame']:.2f} s/frame"
+                 + (f", tracking back {summary['track_back_seconds']:.0f} s"
+                    if summary.get("track_back_seconds") else "") + ")"
                  if "shape_pass_seconds" in summary else "")  # older runs lack it
               + (f" ({summary['evaluations_per_second']:.0f} energy evaluations/s)"
                  if "evaluations_per_second" in summary else "")  # older runs lack it

@@ -48,6 +48,7 @@ import contextlib
 import csv
 import dataclasses
 import io
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -241,7 +242,7 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         # held, their silhouettes kept, and recorded once it can no longer reach them: once.
         opening_end = min(first + tracker.back_frames, len(frames)) - 1
         held: dict[int, list[np.ndarray]] = {}  # frame -> its silhouettes, not yet recorded
-        recorded = 0  # results[:recorded] are in the recording
+        recorded, back_s = 0, 0.0  # results[:recorded] are in the recording
         for index, frame in enumerate(frames):
             masks = masks_of(frame)
             result = tracker.track(frame, masks, init=init_pose if index == first else None)
@@ -249,6 +250,7 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
             held[frame] = masks
             bar.set_postfix_str(f"XOR {result.xor_fraction:.0%} {result.event}"[:40])
             bar.update()
+            started = time.perf_counter()
             if result.status == "recovered":
                 bar.set_postfix_str("tracking back from the recovery")
             for i, again in tracker.track_back_gap(results, held.__getitem__).items():
@@ -259,6 +261,7 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
                 bar.set_postfix_str("the opening again, backwards")
                 for i, again in tracker.track_back(results, held.__getitem__).items():
                     results[i] = again
+            back_s += time.perf_counter() - started
             while recorded < len(results) - tracker.back_frames:
                 recorder.frame(tracker, results[recorded], held.pop(results[recorded].frame))
                 recorded += 1
@@ -285,6 +288,8 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         "seconds_per_frame": timer.seconds / len(results),
         # Where the time went: the start and shape pass, once per sequence, then each frame.
         "shape_pass_seconds": shape_pass.seconds,
+        # Tracking frames again backwards, from the opening's lowest XOR and from recoveries.
+        "track_back_seconds": back_s,
         "tracking_seconds_per_frame": float(np.mean([r.seconds for r in results])),
         "evaluations_per_frame": float(np.mean([r.evaluations for r in results])),
         # Energy evaluations per second of the frames' tracking (the shape pass's not counted).

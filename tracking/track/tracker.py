@@ -551,6 +551,8 @@ class FrameResult:
     silhouette_area: float
     evaluations: int
     seconds: float
+    """The time this frame's forward tracking took (a frame a track back replaced keeps it and
+    its evaluations: `mocap track`'s summary counts a track back's apart)."""
     event: str = ""  # "init ...", "recovered ...", "diverged: ...", "lost: ...", "absent: ..."
     status: str = "tracked"
     """One of `STATUSES`: "init" (a start), "tracked", "recovered" (a divergence, or the first
@@ -1518,7 +1520,9 @@ class SilhouetteTracker:
         behind = sum(back[i].energy for i in range(switch, anchor))
         if switch == anchor or behind > (1 - _BACK_GAIN) * ahead:
             return anchor, {}  # not clearly lower: the forward track stays
-        return switch, {i: back[i] for i in range(switch, anchor)}
+        return switch, {i: dataclasses.replace(back[i], seconds=results[i].seconds,
+                                               evaluations=results[i].evaluations)
+                        for i in range(switch, anchor)}  # fmt: skip
 
     @contextmanager
     def _state_kept(self) -> Iterator[None]:

@@ -527,6 +527,8 @@ def test_the_cartwheels_divergence_is_tracked_back_from_its_recovery(tmp_path):
     assert pose["diverged"] == [] and pose["recovered"] == [52], pose["recovered"]
     assert "the track back from frame 52 over the diverged frames from 46 starts here" in [
         f["event"] for f in pose["frames"]]
+    summary = json.loads((ws / "run.json").read_text())["steps"]["track"]["summary"]
+    assert summary["track_back_seconds"] > 0  # apart from the frames' own, forward
     read = read_recording(ws / "logs" / "track.rrd")
     assert read.rows("track/status_index", "frame") == list(range(53))
     assert read.rows("track/status_index", "Scalars:scalars")[46] == [STATUSES.index("tracked")]
