@@ -500,6 +500,36 @@ first and replaced: the track back run after the whole track (its frames logged 
 recording), and without the shape pass (the cartwheel at frame 150 then 40.6 mm, its shape
 1.62 m, against 27.9 and 1.58 m).
 
+Session 41, a 2-core AMD EPYC: session 40's code gives the same figures here as on its Intel
+Xeon (seed 0 mean 10.8 mm, cartwheel 39.1; frame 150 mean 13.5, cartwheel 27.9, each clip to
+the 0.1 mm). The frames before a recovery are tracked again backwards from it
+(`SilhouetteTracker.track_back_gap`; off with ``--back-xor-factor 0``, so ``no-back`` is
+without both): those of the divergence or loss it recovered from, then on while lower (the
+track slides before the watch calls a divergence), at most 23 frames back, replacing the
+forward ones by the opening's rule (`_BACK_GAIN` 0.1 summed, not tuned again); no track back
+from a recovered pose flagged unexplained, nor over a backward frame flagged where the forward
+one was not (the seed-0 cartwheel's recovery from the hull at frame 27, 50 mm and flagged, had
+taken frames 23-26 from 24-46 to 41-43 mm at a lower XOR: 39.1 -> 39.4 mm, the only clip worse
+on both sets, and now unchanged). Frame 150 on (12 clips): mean 13.5 -> **12.6 mm**, cartwheel
+27.9 -> **20.5** (its frames 46-51, diverged at 101-111 mm and then 52-61, replaced from frame
+29 on at 16-26 mm, none diverged: the target of recovery within 5 frames **met**),
+turn_pirouette 13.5 -> 10.9 (its frames 0-4 before the recovery at 5, 26-72 mm, now 9-19),
+start_walk_stop 7.7 -> 7.8 (frames 21-23 at a lower XOR, 8.8/14.4/14.4 -> 9.6/13.0/16.7 mm),
+the other 9 byte-identical; none above 50 mm, none unrecovered, no frame over 100 mm
+unflagged. Seed 0 (15 clips): mean 10.8 -> 10.8 (10.85 -> 10.79), bend_pickup 10.6 -> 10.2
+(frame 32 diverged, now recovered by the track back from 37), turn_pirouette 11.4 -> 10.9
+(57 diverged, now recovered from 59), the other 13 byte-identical. Seed 1 (walk, cartwheel,
+bend_pickup, squat, boxing, turn_pirouette), data none of this was set on: 7.6, 43.6, 9.6 ->
+**9.2**, 16.4, 6.2 as session 40's, and turn_pirouette@1 13.9 with its frame 57 diverged at
+the clip's end, unrecovered (as since session 36; 32 mm at frame 59 but flagged, 1.7% of the
+hull unexplained). Pose2Sim demo: 100/100 frames, median IoU 0.832 (unchanged). Speed,
+nothing beside, against ``no-back`` in the same run (``--clips walk cartwheel bend_pickup
+turn_pirouette --trackers current no-back``): walk 1.89 against 2.22 frames/s (the opening's
+track back in the shape pass), cartwheel 1.55 and 1.44, bend_pickup 1.30 and 1.38,
+turn_pirouette 1.23 and 1.28: over 1 frame/s on this machine. `mocap track`'s summary now
+counts a track back's seconds apart (``track_back_seconds``), and a replaced frame keeps its
+forward time, so ``then/s`` is the forward tracking's alone.
+
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
 with one other job, so frames/s are low bounds). MPJPE (offsets out), worst joint, frames/s,

@@ -1857,13 +1857,14 @@ def _events(*parts: str) -> str:
 
 
 _BACK_GAIN = 0.1
-"""An opening tracked back (`SilhouetteTracker.track_back`) replaces the forward track only where
-its XOR summed over the frames it replaces is at least this fraction lower: two tracks of a
-right start differ by the silhouettes' noise, and the shape pass would then take its lengths
-from poses no better. Measured on the suite's first 24 frames at seed 0 and from clip frame 150
-(27 clips, the shape pass and the track; session 40): where the start had gone wrong, 0.14-0.26
-lower (the cartwheel, boxing, bend_pickup and squat from frame 150); elsewhere 0.00-0.06 (the
-walk's shape pass 0.017, and its shape from those poses cost it 7.8 -> 8.4 mm)."""
+"""A track back (`SilhouetteTracker._tracked_back`) replaces the forward track only where its XOR
+summed over the frames it replaces is at least this fraction lower: two tracks of a right start
+differ by the silhouettes' noise, and the shape pass would then take its lengths from poses no
+better. Set on openings (`track_back`), on the suite's first 24 frames at seed 0 and from clip
+frame 150 (27 clips, the shape pass and the track; session 40): where the start had gone wrong,
+0.14-0.26 lower (the cartwheel, boxing, bend_pickup and squat from frame 150); elsewhere
+0.00-0.06 (the walk's shape pass 0.017, and its shape from those poses cost it 7.8 -> 8.4 mm).
+Kept for the frames before a recovery (`track_back_gap`, session 41) without tuning."""
 
 _SEARCH_AGAIN_FRAMES = 3
 """After a divergence the start search found nothing better for, the frames between searches
