@@ -1481,17 +1481,17 @@ class SilhouetteTracker:
     def _tracked_back(self, results: Sequence[FrameResult],
                       masks_of: Callable[[int], Sequence[np.ndarray]], first: int, anchor: int,
                       before: int | None = None) -> tuple[int, dict[int, FrameResult]]:
-        """`results`' frames from `anchor` - 1 back to `first` tracked again, backwards, from
-        the anchor's pose (the prediction runs from the frame after it, when there is one, then
-        the anchor), while each is "tracked" (under the absolute bar: backwards, a divergence
-        ends it, no search) and leaves no part of the visual hull out where the forward one
-        did not (`FrameResult.unexplained`); then on to `before` while each is lower than the
-        forward one (once it is not, the two tracks have met). The backward track replaces
-        the forward one from the frame where the two's summed energies are lowest (one switch:
-        both are continuous; a frame without a pose counts infinite) to the anchor, where its
-        XOR there is clearly lower (`_BACK_GAIN`). Returns the switch and the replacing results
-        by index (none: the forward track stays). What tracking a frame changes of the tracker
-        is as before after it (`_state_kept`): the track goes on from its last frame."""
+        """`results`' frames from `anchor` - 1 back to `first` tracked again, backwards, from the
+        anchor's pose (the prediction runs from the frame after it, when there is one, then the
+        anchor), while each is "tracked" (under the absolute bar: backwards, a divergence ends it,
+        no search) and leaves no part of the visual hull out where the forward one did not
+        (`FrameResult.unexplained`); then on to `before` (<= `first`) while each is lower than the
+        forward one (once it is not, the two tracks have met). The backward track replaces the
+        forward one from the frame where the two's summed energies are lowest (one switch: both are
+        continuous; a frame without a pose counts infinite) to the anchor, where its XOR there is
+        clearly lower (`_BACK_GAIN`). Returns the switch and the replacing results by index (none:
+        the forward track stays). What tracking a frame changes of the tracker is as before after it
+        (`_state_kept`): the track goes on from its last frame."""
 
         def forward(i: int) -> float:
             return results[i].energy if results[i].pose is not None else np.inf
@@ -1501,8 +1501,7 @@ class SilhouetteTracker:
             self.history = [results[i].pose.params.copy() for i in (anchor + 1, anchor)
                             if i < len(results) and results[i].pose is not None]
             self._lost_since, self._backwards = None, True
-            last = first if before is None else min(first, before)
-            for i in range(anchor - 1, last - 1, -1):
+            for i in range(anchor - 1, (first if before is None else before) - 1, -1):
                 result = self.track(results[i].frame, masks_of(results[i].frame))
                 if (result.pose is None or result.status != "tracked"
                         or (result.unexplained and not results[i].unexplained)
