@@ -17,7 +17,7 @@ from tracking.body.model import BodyShape
 from tracking.body.motion import motion_from_poses
 from tracking.body.synthetic import walking_poses
 from tracking.rig.synth import SynthConfig, synthesize
-from tracking.track.step import TrackStepConfig, track_workspace
+from tracking.track.step import HeldMasks, TrackStepConfig, track_workspace
 from tracking.track.tracker import TrackConfig
 
 FRAMES = 3
@@ -149,3 +149,22 @@ def test_each_frame_status_is_logged_and_written_to_pose_json(tracked):
     assert [f["status"] for f in pose["frames"]] == ["init", "tracked", "tracked"]
     assert (pose["lost"], pose["diverged"], pose["recovered"]) == ([], [], [])
 
+
+
+def test_held_silhouettes_come_back_bit_for_bit():
+    """The frames a track back may replace are held bit-packed (`HeldMasks`), and what the
+    track back and the recording read is what was added: sizes that are no multiple of 8."""
+    rng = np.random.default_rng(0)
+    masks = [rng.random((121, 163)) > 0.5, rng.random((7, 5)) > 0.3]
+    held = HeldMasks()
+    held.add(4, masks)
+    held.add(5, [~m for m in masks])
+    for frame, expected in ((4, masks), (5, [~m for m in masks])):
+        back = held.masks(frame)
+        assert [m.dtype for m in back] == [np.dtype(bool)] * 2
+        assert all(np.array_equal(b, m) for b, m in zip(back, expected, strict=True))
+    popped = held.pop(5)
+    assert all(np.array_equal(b, ~m) for b, m in zip(popped, masks, strict=True))
+    with pytest.raises(KeyError):
+        held.masks(5)
+    assert all(np.array_equal(b, m) for b, m in zip(held.masks(4), masks, strict=True))
