@@ -253,7 +253,8 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
             try:
                 with shape_pass:
                     init_pose = tracker.calibrate_shape(
-                        [masks_of(f) for f in shape_frames], progress=bar.update)
+                        [masks_of(f) for f in shape_frames], progress=bar.update,
+                        frames=shape_frames)
             except TrackingLost as exc:
                 raise UserError(f"cannot start tracking at frame {frames[first]}: {exc}"
                                 ) from None

@@ -52,24 +52,25 @@ A frame whose energy stays above `max_xor_fraction` of the silhouette area (or 1
 lowest XOR of an initialisation, when real silhouettes with holes and ghosts set a higher
 floor) is a divergence. So is one far above what the model reached on this subject
 (`tracking.track.divergence.XorWatch`: `spike_xor_factor` times the median XOR of the recent
-tracked frames, or `high_xor_factor` times it for `high_xor_frames` frames in a row), which
-the absolute bar lets through when the model fits the subject well. On a divergence the start
+tracked frames, or `high_xor_factor` times it for `high_xor_frames` frames in a row), which the
+absolute bar lets through when the model fits the subject well. On a divergence the start
 search runs again (`_recover`), from the last good pose (with its left/right swaps, the limbs'
-grids over their whole range) and from the visual hull (`initialise`), and the candidate of
-lowest XOR, the tracked pose included, is kept: the frame is "recovered" when the search found
-a pose that is no divergence, "diverged" (its best pose kept, not trusted; its XOR the
-reference from then on) when only the relative tests still fail, and "lost" (no joints; never
-NaN) when the absolute one does. After a "diverged" frame, the first tracked frame back under
-the high bar of the reference before it, its visual hull explained (`max_unexplained_share`),
-is "recovered" too: the track is found again, by the tracking itself. `FrameResult.status`
-says which (`STATUSES`). A frame where no camera has a silhouette is "absent" (the subject
-left the view): no pose and no search; the next frame with silhouettes starts afresh from the
-visual hull and is "recovered" (or "lost" when that start's XOR is over the absolute bar an
-earlier start set). A frame whose visual hull has two separate parts of human size or more
-(`subjects_in_view`: two subjects apart, both in every camera's view) is "two-subjects": no
-pose, rather than a fit to the merged blob. It is looked for where a second subject shows: at
-a start from the hull, and on a divergence before the start search (the other subject's
-silhouettes are unexplained, so the XOR jumps).
+grids over their whole range), in the shape pass's frames from the pose the pass gave the frame
+(alike), and from the visual hull (`initialise`), each only while the ones before found no pose
+that is no divergence, and the candidate of lowest XOR, the tracked pose included, is kept: the
+frame is "recovered" when the search found a pose that is no divergence, "diverged" (its best
+pose kept, not trusted; its XOR the reference from then on) when only the relative tests still
+fail, and "lost" (no joints; never NaN) when the absolute one does. After a "diverged" frame,
+the first tracked frame back under the high bar of the reference before it, its visual hull
+explained (`max_unexplained_share`), is "recovered" too: the track is found again, by the
+tracking itself. `FrameResult.status` says which (`STATUSES`). A frame where no camera has a
+silhouette is "absent" (the subject left the view): no pose and no search; the next frame with
+silhouettes starts afresh from the visual hull and is "recovered" (or "lost" when that start's
+XOR is over the absolute bar an earlier start set). A frame whose visual hull has two separate
+parts of human size or more (`subjects_in_view`: two subjects apart, both in every camera's
+view) is "two-subjects": no pose, rather than a fit to the merged blob. It is looked for where
+a second subject shows: at a start from the hull, and on a divergence before the start search
+(the other subject's silhouettes are unexplained, so the XOR jumps).
 
 A track runs forwards, so a start gone wrong or a divergence is found only by the frames after
 it. Both are tracked again backwards from there (`track_back`: the opening of a track, from its
@@ -695,6 +696,9 @@ class SilhouetteTracker:
         self._gap_statuses: set[str] = set()  # statuses of that run's frames
         self._tracked_any = False  # a frame has had a pose since the start (or shape pass)
         self.shape_frames_used: list[int] = []  # `calibrate_shape`'s frames (indices)
+        # frame -> the pose the shape pass gave it (`calibrate_shape`), trusted: a recovery
+        # there starts from it too (`_recover`)
+        self._shape_pass_poses: dict[int, np.ndarray] = {}
         # (the frame's energy, level, its outline refiner): built once per frame and level
         self._refiner: tuple[SilhouetteEnergy, int, ContourRefiner] | None = None
         self._part: tuple[object, bytes, tuple[float, np.ndarray]] | None = None  # its last
@@ -1065,21 +1069,26 @@ class SilhouetteTracker:
         return x
 
     def calibrate_shape(self, sequence: Sequence[Sequence[np.ndarray]],
-                        progress: Callable[[], object] | None = None) -> Pose:
+                        progress: Callable[[], object] | None = None,
+                        frames: Sequence[int] | None = None) -> Pose:
         """The subject's shape from the first frames of a sequence (masks per frame), before
         tracking it: the first frame is initialised (with its own shape estimate), the others
         up to the last `shape_stride`-th are tracked, and every `shape_stride`-th one's pose is
         refined together with the segment lengths, which the silhouettes of several poses
         tell apart better than one.
         Returns the first frame's pose with that shape; the tracker then starts afresh from it
-        and its event says how it was found (not "the given pose")."""
+        and its event says how it was found (not "the given pose"). frames: the frame numbers
+        of `sequence` (default 0, 1, ...), by which a recovery in these frames later finds
+        the pose the pass gave it (`_recover`)."""
         if self.shape is not None:
             raise ValueError("the shape is already known")
         with self._searching_start():
-            return self._calibrate_shape(sequence, progress)
+            return self._calibrate_shape(sequence, progress,
+                                         range(len(sequence)) if frames is None else frames)
 
     def _calibrate_shape(self, sequence: Sequence[Sequence[np.ndarray]],
-                         progress: Callable[[], object] | None) -> Pose:  # fmt: skip
+                         progress: Callable[[], object] | None, frames: Sequence[int],
+                         ) -> Pose:  # fmt: skip
         """`calibrate_shape` (the start's parameters held)."""
         cfg = self.config
         stride = max(cfg.shape_stride, 1)
@@ -1106,6 +1115,9 @@ class SilhouetteTracker:
         if 0 in back:
             self._start_event += f", the first {max(back) + 1} tracked back"
         results = [back.get(i, r) for i, r in enumerate(results)]
+        self._shape_pass_poses = {frames[i]: r.pose.params for i, r in enumerate(results)
+                                  if r.pose is not None and not r.unexplained
+                                  and r.status in ("init", "tracked", "recovered")}
         picked = [(needed[i], r.pose) for i, r in enumerate(results) if i % stride == 0]
         # Which frames of `sequence` (indices) the shape came from: fewer than a full pass's
         # when the sequence is short or the pass lost the subject (`mocap track` warns).
@@ -1685,7 +1697,7 @@ class SilhouetteTracker:
                 # After lost frames the start search runs from the last good pose as well as
                 # from the visual hull, whose upright starts and fit cannot reach every pose.
                 energy = self._energy(masks)
-                x, _, found = self._recover(masks, energy, None, np.inf)
+                x, _, found = self._recover(frame, masks, energy, None, np.inf)
                 if x is None:  # no candidate: neither the last good pose nor the hull
                     raise TrackingLost("the start search found no pose")
                 event = f"init from {found}"
@@ -1742,7 +1754,7 @@ class SilhouetteTracker:
                     """A pose of this energy is no divergence (under both bars)."""
                     return e_y <= limit and not self.watch.verdict(e_y / area)
 
-                x, e, found = self._recover(masks, energy, x, e, enough=settled)
+                x, e, found = self._recover(frame, masks, energy, x, e, enough=settled)
                 if e > limit:
                     return self._lost(frame, e, area, start, f"{why}; the start search found "
                                       f"nothing under it (XOR {e / area:.1%})")
@@ -1766,7 +1778,7 @@ class SilhouetteTracker:
                 # Still over the bar of before a divergence the search found nothing better
                 # for: the search again, every few frames, until the track is back.
                 since, bar = self.watch.diverged
-                y, e_y, found = self._recover(masks, energy, x, e,
+                y, e_y, found = self._recover(frame, masks, energy, x, e,
                                               enough=lambda value: value <= bar * area)
                 if found is not None:
                     x, e = y, e_y
@@ -1817,17 +1829,24 @@ class SilhouetteTracker:
         return FrameResult(frame, None, energy, area, self.evaluations,
                            time.perf_counter() - start, f"{status}: {why}", status)  # fmt: skip
 
-    def _recover(self, masks: Sequence[np.ndarray], energy: SilhouetteEnergy,
+    def _recover(self, frame: int, masks: Sequence[np.ndarray], energy: SilhouetteEnergy,
                  x: np.ndarray | None, e: float,
                  enough: Callable[[float], bool] | None = None,
                  ) -> tuple[np.ndarray | None, float, str | None]:  # fmt: skip
-        """After a divergence or lost frames, the start search again: from the last good pose
-        (and its left/right swaps) with the limbs' grids over their whole range, then from the
-        visual hull (`initialise`). Returns the candidate of lowest XOR, the tracked pose `x`
-        (energy `e`; None and inf after lost frames) included, its energy, and where it came
-        from (None: `x`). Cheapest first: when the last good pose's candidate is `enough` (its
-        energy no divergence), the hull's search (8 of a recovery's 9 s on the suite's
-        cartwheel) does not run."""
+        """After a divergence or lost frames at `frame`, the start search again: from the last
+        good pose (and its left/right swaps) with the limbs' grids over their whole range, then
+        from the pose the shape pass gave this frame (alike), then from the visual hull
+        (`initialise`). Returns the candidate of lowest XOR, the tracked pose `x` (energy `e`;
+        None and inf after lost frames) included, its energy, and where it came from (None:
+        `x`). Cheapest first: once a candidate is `enough` (its energy no divergence), the
+        next ones do not run; the hull's search is 8 of a recovery's 9 s on the suite's
+        cartwheel.
+
+        The shape pass tracks the first frames before the track proper tracks them again with
+        the shape it found, and a divergence there is often one the pass met too: its search
+        ran then, and its pose, refined with the subject's shape, spares running it again
+        (the turn_pirouette from clip frame 150 met its divergence at frame 5 in both: 8 s
+        each, session 42)."""
         history = self.history
         best_x, best_e, found = x, e, None
 
@@ -1842,6 +1861,10 @@ class SilhouetteTracker:
             seed = self._best_hypothesis(energy, good).params
             consider(f"the last good pose (frame {good_frame})",
                      self._refine_all(energy, seed, init=True))
+        passed = self._shape_pass_poses.get(frame)
+        if passed is not None and (found is None or enough is None or not enough(best_e)):
+            seed = self._best_hypothesis(energy, passed).params
+            consider("the shape pass's pose", self._refine_all(energy, seed, init=True))
         if found is None or enough is None or not enough(best_e):
             with suppress(TrackingLost):  # no visual hull: the last good pose's alone
                 consider("the visual hull", self.initialise(masks, enough=enough)[0].params)

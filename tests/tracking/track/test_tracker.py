@@ -591,6 +591,58 @@ def test_the_shape_pass_tracks_no_frame_after_its_last_refined_one(monkeypatch):
     assert (first.params == 0).all()
 
 
+
+def _shape_pass(monkeypatch, tracker, statuses, frames):
+    """`calibrate_shape` over `frames` with stand-ins (`test_the_shape_pass_tracks_no_frame_
+    after_its_last_refined_one`'s) whose frame i has status statuses[i] and a pose whose
+    parameters are all 10 + i; "unexplained" is "tracked", flagged."""
+    def track(index, masks, init=None):
+        status = statuses[index]
+        return FrameResult(index, Pose(np.full(N_POSE_PARAMS, 10.0 + index)), 0.0, 1.0, 0, 0.0,
+                           "", "tracked" if status == "unexplained" else status,
+                           unexplained=status == "unexplained")  # fmt: skip
+
+    monkeypatch.setattr(tracker, "track", track)
+    monkeypatch.setattr(tracker, "_refine_shape", lambda sequence, poses: poses)
+    monkeypatch.setattr(tracker, "_energy", lambda masks: None)
+    monkeypatch.setattr(tracker, "_refine_all", lambda energy, x, init=False: x)
+    monkeypatch.setattr(tracker, "track_back", lambda results, masks_of: {})
+    tracker.calibrate_shape([[i] for i in range(len(statuses))], frames=frames)
+
+
+def test_a_recovery_in_the_shape_pass_frames_starts_from_the_pose_it_gave_them(monkeypatch):
+    """The shape pass over frames 100-105 (by number) gives frames 100, 101, 103 and 105
+    poses it trusts; 102 diverged and 104 is flagged unexplained. A recovery at 103 tries
+    the pass's pose (refined like the last good pose) after the last good pose: enough
+    there (no divergence), the hull's search does not run. At 102 and 104, and at 103 when
+    that pose is no better, the hull's search runs; the lowest XOR wins. (The energy here is
+    a pose's first parameter.)"""
+    tracker = SilhouetteTracker(CAMERAS, dataclasses.replace(SUPERQUADRIC, shape_stride=1))
+    _shape_pass(monkeypatch, tracker, ["init", "tracked", "diverged", "recovered",
+                                       "unexplained", "tracked"], frames=range(100, 106))
+    hull = []
+
+    def initialise(masks, init=None, enough=None):
+        hull.append(masks)
+        return Pose(np.full(N_POSE_PARAMS, 8.0)), "init from visual hull"
+
+    monkeypatch.setattr(tracker, "_best_hypothesis", lambda energy, x: Pose(x))
+    monkeypatch.setattr(tracker, "initialise", initialise)
+    tracker._last_good = (99, np.full(N_POSE_PARAMS, 20.0))
+    energy = lambda pose, level=0: float(pose.params[0])  # noqa: E731
+
+    def recover(frame, bar):
+        hull.clear()
+        x, e, found = tracker._recover(frame, [frame], energy, np.full(N_POSE_PARAMS, 30.0),
+                                       30.0, enough=lambda value: value <= bar)  # fmt: skip
+        return e, found, len(hull)
+
+    assert recover(103, bar=15) == (13, "the shape pass's pose", 0)
+    assert recover(103, bar=5) == (8, "the visual hull", 1)
+    assert recover(102, bar=15) == (8, "the visual hull", 1)
+    assert recover(104, bar=15) == (8, "the visual hull", 1)
+    assert recover(105, bar=25) == (20, "the last good pose (frame 99)", 0)
+
 def _opening(energies, tracker, backwards, seen):
     """Stand-ins for `track_back`'s test: the forward results of `energies` (XOR pixels of
     a silhouette of 100; each pose's parameters all its frame's number), and `tracker.track`
