@@ -23,7 +23,7 @@ import dataclasses
 import multiprocessing
 import os
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Any, Generic, TypeVar
 
 T = TypeVar("T")
 
@@ -86,6 +86,67 @@ def fork_map(job: Callable[[int], T], count: int, workers: int) -> list[T]:
             return pool.map(_run, range(count), chunksize=1)
     finally:
         _job = None
+
+
+class Beside(Generic[T]):
+    """``job()`` computed in a forked process beside this one, which goes on meanwhile: `done`
+    says whether it has ended, `result` waits for it (and raises what it raised). Computed
+    here, at once, where `fork_map` would not fork: one worker asked for, no fork, or this
+    process a `fork_map` child or a daemon. `job` sees this process's state as it was at the
+    fork, so it must not depend on what this process does after it; it returns what this
+    process needs (its other changes are lost with the child)."""
+
+    def __init__(self, job: Callable[[], T], workers: int) -> None:
+        self._outcome: tuple[bool, Any] | None = None
+        self._process: Any = None
+        if (workers <= 1 or _in_child or multiprocessing.current_process().daemon
+                or "fork" not in multiprocessing.get_all_start_methods()):
+            try:
+                self._outcome = (True, job())
+            except Exception as exc:  # raised by `result`, as from the child
+                self._outcome = (False, exc)
+            return
+        context = multiprocessing.get_context("fork")
+        self._receive, send = context.Pipe(duplex=False)
+        # daemon: ended with this process (and, as a `fork_map` child, forking no further)
+        self._process = context.Process(target=_send_outcome, args=(job, send), daemon=True)
+        self._process.start()
+        send.close()
+
+    def done(self) -> bool:
+        """Whether `result` would return without waiting."""
+        return self._outcome is not None or self._receive.poll()
+
+    def result(self) -> T:
+        """The job's result, once it has ended."""
+        if self._outcome is None:
+            try:
+                self._outcome = self._receive.recv()
+            except EOFError:  # the child died without a word (killed)
+                self._outcome = (False, RuntimeError(
+                    f"a process beside this one ended without a result (exit code "
+                    f"{self._process.exitcode})"))
+            finally:
+                self._process.join()
+                self._receive.close()
+        ok, value = self._outcome
+        if not ok:
+            raise value
+        return value
+
+
+def _send_outcome(job: Callable[[], object], send: Any) -> None:
+    """A `Beside` child: the job run as `fork_map`'s children run theirs, its outcome sent."""
+    _enter_child()
+    try:
+        outcome: tuple[bool, object] = (True, job())
+    except Exception as exc:
+        outcome = (False, exc)
+    try:
+        send.send(outcome)
+    except Exception as exc:  # an outcome that does not pickle
+        send.send((False, RuntimeError(f"{type(exc).__name__}: {exc}")))
+    send.close()
 
 
 def single_blas_thread() -> contextlib.AbstractContextManager[object]:

@@ -1,13 +1,15 @@
-"""`recon.parallel.fork_map`: the jobs' results in order, computed in forked processes."""
+"""`recon.parallel.fork_map`: the jobs' results in order, computed in forked processes; and
+`Beside`: one job in a forked process while this one goes on."""
 
 from __future__ import annotations
 
 import os
+import time
 
 import pytest
 
 from recon.errors import UserError
-from recon.parallel import available_cores, fork_map, workers_for
+from recon.parallel import Beside, available_cores, fork_map, workers_for
 
 
 def test_fork_map_returns_the_jobs_results_in_order_from_other_processes():
@@ -41,6 +43,37 @@ def test_a_job_that_fails_raises_in_the_caller_and_a_child_does_not_fork_again()
     for pids in fork_map(nested, 2, 2):
         assert len(set(pids)) == 1 and pids[0] != os.getpid()
 
+
+
+def test_a_job_beside_runs_in_another_process_while_this_one_goes_on():
+    state = {"touched": 0}
+
+    def job() -> tuple[int, int, list[int]]:
+        state["touched"] += 1  # the child's copy
+        time.sleep(1.0)
+        # In the child, a map runs there, in turn: it does not fork again.
+        return os.getpid(), state["touched"], fork_map(lambda _: os.getpid(), 2, 2)
+
+    started = time.perf_counter()
+    beside = Beside(job, 2)
+    assert time.perf_counter() - started < 0.8 and not beside.done()  # not waited for
+    state["touched"] = 10  # after the fork: the job does not see it
+    pid, touched, mapped = beside.result()
+    assert pid != os.getpid() and touched == 1 and mapped == [pid, pid]
+    assert beside.done() and beside.result()[0] == pid and state["touched"] == 10
+    # One worker: here, at once.
+    here = Beside(job, 1)
+    assert here.done() and here.result()[:2] == (os.getpid(), 11)
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_job_beside_that_fails_raises_in_result(workers):
+    def job() -> int:
+        raise ValueError("the job beside failed")
+
+    beside = Beside(job, workers)
+    with pytest.raises(ValueError, match="the job beside failed"):
+        beside.result()
 
 def test_workers_setting(monkeypatch: pytest.MonkeyPatch):
     monkeypatch.delenv("MOCAP_WORKERS", raising=False)

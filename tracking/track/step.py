@@ -47,6 +47,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import dataclasses
+import functools
 import io
 import time
 from collections.abc import Sequence
@@ -58,7 +59,7 @@ import cv2
 import numpy as np
 
 from recon.errors import UserError
-from recon.parallel import settings_of, single_blas_thread
+from recon.parallel import Beside, settings_of, single_blas_thread, workers_for
 from recon.progress import bar as progress_bar
 from recon.workspace import Timer, Workspace, atomic_output, fingerprint, write_json_atomic
 from tracking.body.model import BONES, NODE_NAMES, Pose, TrackedModel, pose_in_frame
@@ -264,9 +265,22 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         # The frames a track back may still replace (the opening, `track_back`; a divergence
         # or loss a later frame recovers from, `track_back_gap`: the last `back_frames`) are
         # held, their silhouettes kept, and recorded once it can no longer reach them: once.
+        # A track back runs beside the track, in a forked process (`Beside`: it leaves the
+        # tracker as it found it, so the track goes on alike), and the frames it may replace
+        # wait for it; the next track back, which reads their statuses, waits for it too.
         opening_end = min(first + tracker.back_frames, len(frames)) - 1
         held = HeldMasks()  # frame -> its silhouettes, not yet recorded
         recorded, back_s = 0, 0.0  # results[:recorded] are in the recording
+        workers = workers_for(config.workers)
+        pending: tuple[int, Beside[dict[int, FrameResult]]] | None = None  # (from index, job)
+
+        def settle() -> None:
+            nonlocal pending
+            if pending is not None:
+                for i, again in pending[1].result().items():
+                    results[i] = again
+                pending = None
+
         for index, frame in enumerate(frames):
             masks = masks_of(frame)
             result = tracker.track(frame, masks, init=init_pose if index == first else None)
@@ -275,20 +289,32 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
             bar.set_postfix_str(f"XOR {result.xor_fraction:.0%} {result.event}"[:40])
             bar.update()
             started = time.perf_counter()
-            if result.status == "recovered":
+            if pending is not None and pending[1].done():
+                settle()
+            backs = []  # (track back, the first index it may replace)
+            if result.status == "recovered":  # (`track_back_gap` does nothing after others)
                 bar.set_postfix_str("tracking back from the recovery")
-            for i, again in tracker.track_back_gap(results, held.masks).items():
-                results[i] = again
+                backs.append((tracker.track_back_gap, index + 1 - tracker.back_frames))
             if index == opening_end:
                 # A start gone wrong that the track found its way out of: tracked again,
                 # backwards, from the opening's frame of lowest XOR.
                 bar.set_postfix_str("the opening again, backwards")
-                for i, again in tracker.track_back(results, held.masks).items():
-                    results[i] = again
+                backs.append((tracker.track_back, first))
+            if backs:
+                settle()
+            for k, (track_back, reach) in enumerate(backs):
+                job = Beside(functools.partial(track_back, list(results), held.masks), workers)
+                pending = (max(reach, 0), job)
+                if k + 1 < len(backs):
+                    settle()  # the next one reads what this one replaces
             back_s += time.perf_counter() - started
-            while recorded < len(results) - tracker.back_frames:
+            while (recorded < len(results) - tracker.back_frames
+                   and (pending is None or recorded < pending[0])):
                 recorder.frame(tracker, results[recorded], held.pop(results[recorded].frame))
                 recorded += 1
+        started = time.perf_counter()
+        settle()
+        back_s += time.perf_counter() - started
         for r in results[recorded:]:
             recorder.frame(tracker, r, held.pop(r.frame))
         bar.close()
@@ -312,7 +338,8 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         "seconds_per_frame": timer.seconds / len(results),
         # Where the time went: the start and shape pass, once per sequence, then each frame.
         "shape_pass_seconds": shape_pass.seconds,
-        # Tracking frames again backwards, from the opening's lowest XOR and from recoveries.
+        # Tracking frames again backwards, from the opening's lowest XOR and from recoveries:
+        # the time the track waited for it (beside the track, with workers, it takes more).
         "track_back_seconds": back_s,
         "tracking_seconds_per_frame": float(np.mean([r.seconds for r in results])),
         "evaluations_per_frame": float(np.mean([r.evaluations for r in results])),

@@ -487,7 +487,8 @@ class TrackConfig:
         default=0,
         metadata={"help": "processes that fit and refine the candidate starts side by side "
                   "(the automatic start's and a recovery's), and a mend's two limb searches "
-                  "(recon.parallel.fork_map): 0 = "
+                  "(recon.parallel.fork_map); above 1, mocap track also tracks back (after a "
+                  "recovery, and the opening) beside the track: 0 = "
                   "$MOCAP_WORKERS if set, else one per core this process may use; 1 = this "
                   "process alone; the poses are the same"},
     )  # fmt: skip

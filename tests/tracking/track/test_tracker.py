@@ -512,14 +512,16 @@ def test_the_cartwheels_divergence_is_tracked_back_from_its_recovery(tmp_path):
     forwards, the track slides from frame 34 (XOR 13.9% -> 20.8% at 45, 44 mm), diverges at
     frame 46 (101-111 mm at 46-48, 52-61 mm at 49-51) and finds the subject again at 52 (24
     mm). Tracked back from 52, the frames from 29 on replace it: each under 30 mm, none
-    diverged. The recording holds each frame once, with its final status."""
+    diverged. With two workers (`make test` sets one), the track backs run beside the track
+    (`recon.parallel.Beside`), and the frames they may replace wait for them: the recording
+    holds each frame once, in order, with its final status."""
     from tests.helpers import read_recording
 
     ws = tmp_path / "cartwheel"
     made = run_cli("synth", ws, "--bvh", shared_dataset("mocap_bvh") / "cmu_cartwheel.bvh",
                    "--frames", "60", "--first-frame", "150")  # fmt: skip
     assert made.returncode == 0, made.stderr
-    result = run_cli("track", ws, "--last", "52")
+    result = run_cli("track", ws, "--last", "52", "--workers", "2")
     assert result.returncode == 0, result.stderr
     errors = _frame_errors_mm(ws)
     assert max(errors[f] for f in range(40, 52)) < 30, errors
