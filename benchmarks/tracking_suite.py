@@ -530,6 +530,32 @@ turn_pirouette 1.23 and 1.28: over 1 frame/s on this machine. `mocap track`'s su
 counts a track back's seconds apart (``track_back_seconds``), and a replaced frame keeps its
 forward time, so ``then/s`` is the forward tracking's alone.
 
+Session 42, the same AMD EPYC: speed on the frame-150 set, where 1 frame/s was not met on the
+cartwheel (0.96) and turn_pirouette (0.95). A recovery in the shape pass's frames starts from
+the pose the pass gave the frame (after the last good pose, before the hull's search: the
+pirouette from frame 150 diverged at frame 5 in the pass and again in the track, and its
+search ran twice, 8-10 s each). A track back runs beside the track in a forked process
+(`recon.parallel.Beside`: the tracking is one core's, the other idle), and the frames it may
+replace are recorded once it has ended. The figures: frame 150 (12 clips), turn_pirouette
+10.9 -> **10.4 mm** (frame 5 recovered from the pass's pose at XOR 13.2% against the hull's
+15.2%; 19, 20 and 23 now recovered too, none unrecovered), the other 11 byte-identical, mean
+12.6; seed 0 (15 clips) and seed 1 (6 clips) byte-identical (mean 10.8; turn_pirouette@1's
+frame 57 still diverged at the clip's end); Pose2Sim demo 100/100 frames, median IoU 0.832;
+the walk 7.8 mm as the ``former`` tracker's in the same run. The track backs beside the
+track change nothing to the bit (joints.csv, pose.json's frames and the recording's statuses
+of the frame-150 cartwheel and pirouette). Speed, nothing beside: frame 150, cartwheel
+**0.96** and turn_pirouette **0.97** frames/s (0.97 and 0.93 at the session's start, on the
+code before, in a run when the machine was faster: walk 2.10 against 1.91), the other 10
+1.24-2.03: **not met** on the two; seed 0 1.19-2.28 (bend_pickup 1.19, turn_pirouette 1.20,
+cartwheel 1.32), every target PASS. The machine's speed drifts by a fifth within the hour, so
+the two changes were measured against the code before in turn, on the same workspaces (`mocap
+track --overwrite`, A B A B, later in the session with the machine slower): the cartwheel
+1.20 and 1.19 s/frame before, 1.03 and 1.02 after (**1.17x**; its track back waited on 3 s
+against 9); turn_pirouette 1.18 and 1.17 before, 1.06 and 1.04 after (**1.12x**). On these
+two, 0.94-0.98 frames/s in the A/B runs and 0.96-0.97 in the suite run above; at the
+session's first measurement of the code before (1.00 and 1.05 s/frame, the machine faster)
+the ratios would give 1.07-1.17. 1 frame/s there depends on the machine's hour: no margin.
+
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
 with one other job, so frames/s are low bounds). MPJPE (offsets out), worst joint, frames/s,
