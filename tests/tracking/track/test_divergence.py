@@ -83,7 +83,7 @@ def _track_shown(config: TrackConfig, shown: list[Pose], recover=None, masks_of=
 
     tracker = SilhouetteTracker(CAMERAS, config, shape=SHAPE)
     if recover is not None:
-        tracker._recover = lambda masks, energy, x, e, enough=None: recover(
+        tracker._recover = lambda frame, masks, energy, x, e, enough=None: recover(
             tracker, energy, x, e)
     results, errors = [], []
     for frame, pose in enumerate(shown):
@@ -225,7 +225,7 @@ def test_a_recovery_searches_the_hull_only_when_the_last_good_pose_is_not_enough
     before = energy(Pose(tracked))
     for enough, searches in ((lambda e: True, 0), (lambda e: False, 1), (None, 1)):
         searched.clear()
-        x, e, found = tracker._recover(masks, energy, tracked, before, enough=enough)
+        x, e, found = tracker._recover(6, masks, energy, tracked, before, enough=enough)
         assert len(searched) == searches, (enough, found)
         if searches:  # the stand-in's pose, exactly
             assert found == "the visual hull" and _mpjpe_mm(Pose(x), SHAPE, shown) < 1
