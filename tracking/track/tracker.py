@@ -1857,16 +1857,19 @@ class SilhouetteTracker:
             if e_y < best_e:
                 best_x, best_e, found = y, e_y, name
 
-        if self._last_good is not None:
-            good_frame, good = self._last_good
-            seed = self._best_hypothesis(energy, good).params
-            consider(f"the last good pose (frame {good_frame})",
-                     self._refine_all(energy, seed, init=True))
-        passed = self._shape_pass_poses.get(frame)
-        if passed is not None and (found is None or enough is None or not enough(best_e)):
-            seed = self._best_hypothesis(energy, passed).params
-            consider("the shape pass's pose", self._refine_all(energy, seed, init=True))
-        if found is None or enough is None or not enough(best_e):
+        def settled() -> bool:
+            """A candidate no divergence is found: the dearer ones do not run."""
+            return found is not None and enough is not None and enough(best_e)
+
+        poses = [] if self._last_good is None else [
+            (f"the last good pose (frame {self._last_good[0]})", self._last_good[1])]
+        if frame in self._shape_pass_poses:
+            poses.append(("the shape pass's pose", self._shape_pass_poses[frame]))
+        for name, pose in poses:  # each with its left/right swaps, limbs over their range
+            if not settled():
+                seed = self._best_hypothesis(energy, pose).params
+                consider(name, self._refine_all(energy, seed, init=True))
+        if not settled():
             with suppress(TrackingLost):  # no visual hull: the last good pose's alone
                 consider("the visual hull", self.initialise(masks, enough=enough)[0].params)
         # A recovered pose has no velocity; the tracked one keeps its own.

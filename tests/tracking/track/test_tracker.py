@@ -482,6 +482,15 @@ def _frame_errors_mm(ws) -> dict[int, float]:
             for f in sorted(set(frames))}  # fmt: skip
 
 
+def _suite_clip_from_150(root, clip: str):
+    """The motion suite's `clip` from clip frame 150 (`tracking_suite.py --start 150`): its 60
+    frames synthesised by `mocap synth` into root/clip (they set the ring of cameras)."""
+    ws = root / clip
+    made = run_cli("synth", ws, "--bvh", shared_dataset("mocap_bvh") / f"cmu_{clip}.bvh",
+                   "--frames", "60", "--first-frame", "150")  # fmt: skip
+    assert made.returncode == 0, made.stderr
+    return ws
+
 @pytest.mark.slow  # two tracks of 24 frames at 640x480: 100 s
 @pytest.mark.shared_data
 def test_a_start_gone_wrong_is_tracked_back_from_the_frames_after_it(tmp_path):
@@ -489,10 +498,7 @@ def test_a_start_gone_wrong_is_tracked_back_from_the_frames_after_it(tmp_path):
     automatic start holds both arms in a guard in front of the chest, 220-390 mm off, and the
     track finds them a few frames later. Tracked back from there, the first frames are right;
     with --back-xor-factor 0 they are not."""
-    ws = tmp_path / "boxing"
-    made = run_cli("synth", ws, "--bvh", shared_dataset("mocap_bvh") / "cmu_boxing.bvh",
-                   "--frames", "60", "--first-frame", "150")  # fmt: skip
-    assert made.returncode == 0, made.stderr
+    ws = _suite_clip_from_150(tmp_path, "boxing")
     # The suite's 60 frames (they set the ring of cameras), the first 24 tracked.
     off = run_cli("track", ws, "--last", "23", "--back-xor-factor", "0")
     assert off.returncode == 0, off.stderr
@@ -517,10 +523,7 @@ def test_the_cartwheels_divergence_is_tracked_back_from_its_recovery(tmp_path):
     holds each frame once, in order, with its final status."""
     from tests.helpers import read_recording
 
-    ws = tmp_path / "cartwheel"
-    made = run_cli("synth", ws, "--bvh", shared_dataset("mocap_bvh") / "cmu_cartwheel.bvh",
-                   "--frames", "60", "--first-frame", "150")  # fmt: skip
-    assert made.returncode == 0, made.stderr
+    ws = _suite_clip_from_150(tmp_path, "cartwheel")
     result = run_cli("track", ws, "--last", "52", "--workers", "2")
     assert result.returncode == 0, result.stderr
     errors = _frame_errors_mm(ws)
