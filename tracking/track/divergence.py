@@ -16,7 +16,7 @@ the median: on clean renders the median is ~2% and a few pixels of difference wo
 After a divergence the start search found nothing better for (`diverge`), the level the model
 reaches is the reference, and the watch keeps the high bar of the reference before it: the
 first frame back under that bar (`returned`; the tracker also asks that the visual hull be
-explained) is the track found again.
+explained) is the track found again, and the tracker calls the frames over it diverged still.
 """
 
 from __future__ import annotations
