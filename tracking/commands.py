@@ -195,8 +195,10 @@ class FitCommand:
             ws = Workspace.open(args.workspace)
             summary, paths = fit_workspace(ws, subject, config, overwrite=args.overwrite)
         verdict = "fitted" if summary["success"] else "FAILED"
-        print(f"body fit   {verdict}: {summary['message']}; median distance "
-              f"{summary['residual_median']:.4g}, {summary['inlier_fraction']:.0%} inliers, "
+        residuals = ("" if summary["residual_median"] is None else
+                     f"median distance {summary['residual_median']:.4g}, "
+                     f"{summary['inlier_fraction']:.0%} inliers, ")  # (none: --no-judge)
+        print(f"body fit   {verdict}: {summary['message']}; {residuals}"
               f"height {summary['height']:.3g}")
         for path in paths.values():
             print(f"           {path}")

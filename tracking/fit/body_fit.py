@@ -270,6 +270,14 @@ class FitConfig:
                   "(recon.parallel.fork_map): 0 = $MOCAP_WORKERS if set, else one per core "
                   "this process may use; 1 = this process alone; the fit is the same"},
     )  # fmt: skip
+    judge: bool = field(
+        default=True,
+        metadata={"help": "judge the fits by the acceptance test (the tests above) and try "
+                  "the next orientations and the fallbacks while none passes; --no-judge: "
+                  "the lowest-cost fit of the first orientations, not judged (its message "
+                  "says so; a superquadric fit then has no residuals: NaN), as a start "
+                  "that something else refines (mocap track's)"},
+    )  # fmt: skip
 
     def __post_init__(self) -> None:
         from recon.errors import UserError
@@ -328,12 +336,17 @@ class FitResult:
         return self.model_to_cloud * self.model.posed_vertices(self.pose)
 
     def summary(self) -> dict[str, object]:
+        """The fit's figures for fit.json: residuals not computed (`FitConfig.judge` off) are
+        None (JSON null), not NaN (no JSON)."""
+        def finite(value: float) -> float | None:
+            return value if np.isfinite(value) else None
+
         return {
             "success": self.success,
             "message": self.message,
-            "residual_median": self.residual_median,
-            "residual_rms": self.residual_rms,
-            "inlier_fraction": self.inlier_fraction,
+            "residual_median": finite(self.residual_median),
+            "residual_rms": finite(self.residual_rms),
+            "inlier_fraction": finite(self.inlier_fraction),
             "height": self.model_to_cloud * self.shape.height,
             "model_to_cloud": self.model_to_cloud,
             "points": self.points,
@@ -902,13 +915,16 @@ def fit_body(points: np.ndarray, config: FitConfig | None = None,
         ``config.body``'s (`_refined` with `cfg`; the cost of its mesh at the same scale)."""
         if x.tobytes() not in judged:
             if config.body == BodyModel.name:
-                ok, problems, outcome = _acceptance(x, points, config)
+                ok, problems, outcome = (_acceptance(x, points, config) if config.judge
+                                         else _unjudged(x))
                 outcome, cost = (*outcome, 1.0), problem.cost(x, points)
             else:
                 ok, problems, outcome = _refined(x, points, cfg, dense)
                 pose, model, *_, model_to_cloud = outcome
                 vertices = model_to_cloud * model.posed_vertices(pose)
                 cost = two_way_cost(vertices, points, problem.scale)
+                if not config.judge:
+                    ok, problems = True, [_NOT_JUDGED]
             judged[x.tobytes()] = (ok, problems, outcome, cost)
         return judged[x.tobytes()]
 
@@ -998,7 +1014,7 @@ def fit_body(points: np.ndarray, config: FitConfig | None = None,
     tried = verdicts(fits)
     verdict = min([v for v in tried if v[0]] or tried, key=lambda v: v[3])
     ok, problems, (pose, model, median, rms, inliers, model_to_cloud), _ = verdict
-    message = "; ".join((["ok"] if ok else []) + problems)
+    message = "; ".join((["ok"] if ok and config.judge else []) + problems)
     return FitResult(pose, model.shape, ok, message, median, rms, inliers, len(points),
                      time.perf_counter() - start, candidates, model, model_to_cloud)  # fmt: skip
 
@@ -1144,10 +1160,25 @@ def second_look(model: TrackedModel, pose: Pose, points: np.ndarray, looked: np.
 
 def _acceptance(x: np.ndarray, points: np.ndarray, config: FitConfig):
     """`acceptance` of the superquadric fit `x`, and its pose and model."""
-    pose = Pose(np.clip(x[:N_POSE_PARAMS], LOWER_LIMITS, UPPER_LIMITS))
-    model = BodyModel(shape_from_scales(float(x[_H]), float(x[_G])))
+    pose, model = _superquadrics(x)
     ok, problems, residuals = acceptance(model, pose, points, config)
     return ok, problems, (pose, model, *residuals)
+
+
+def _unjudged(x: np.ndarray):
+    """`_acceptance` of `FitConfig.judge` off: passed, no residuals (NaN). The mesh distances
+    are Open3D's, whose import alone was 1.5-2 s of a `mocap track` that needs nothing else of
+    it (its start's fit judges nothing)."""
+    return True, [_NOT_JUDGED], (*_superquadrics(x), np.nan, np.nan, np.nan)
+
+
+_NOT_JUDGED = "not judged (--no-judge)"
+
+
+def _superquadrics(x: np.ndarray) -> tuple[Pose, BodyModel]:
+    """The pose and the superquadric model of the fit `x` (pose parameters, height, girth)."""
+    pose = Pose(np.clip(x[:N_POSE_PARAMS], LOWER_LIMITS, UPPER_LIMITS))
+    return pose, BodyModel(shape_from_scales(float(x[_H]), float(x[_G])))
 
 
 def acceptance(model: TrackedModel, pose: Pose, points: np.ndarray, config: FitConfig

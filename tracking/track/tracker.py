@@ -784,16 +784,13 @@ class SilhouetteTracker:
             points = points[~floor_only(points, up, band_m=self.config.floor_band_m,
                                         voxel_m=self.config.voxel_m)]  # fmt: skip
         # The superquadrics' fit, whatever `mocap fit` defaults to: it is only a start, the
-        # silhouettes refine it (a skinned refinement of a hull is slow and no better). Its
-        # tests off, the height's too: a hull the upright orientations cannot fit (a body
-        # upside down) failed that one and ran every fallback stage of the fit, 126 s
+        # silhouettes refine it (a skinned refinement of a hull is slow and no better). Not
+        # judged (the height's test neither): a hull the upright orientations cannot fit (a
+        # body upside down) failed the test and ran every fallback stage of the fit, 126 s
         # against 13 for the first stage (test_bad_input's handstand); the hull's extent caps
         # the start's height below, and a recovery keeps the subject's shape.
-        fit = fit_body(points, FitConfig(body="superquadric", min_inlier_fraction=0.0,
-                                         max_median_residual=1.0,
-                                         max_unexplained_cluster=1.0,
-                                         min_limb_support=0.0, metric=False,
-                                         hold=_START_HELD, workers=self.config.workers),
+        fit = fit_body(points, FitConfig(body="superquadric", judge=False, hold=_START_HELD,
+                                         workers=self.config.workers),
                        up=up)  # fmt: skip
         bent = up is not None and not is_upright(fit.pose, fit.shape, up)
         estimate_shape = self.shape is None

@@ -24,7 +24,7 @@ from tracking.body.model import (
 from tracking.body.motion import read_pose_file
 from tracking.body.synthetic import body_cloud, random_pose
 from tracking.fit.body_fit import FitConfig, fit_body
-from tracking.fit.step import SubjectConfig, fit_workspace, isolate_subject
+from tracking.fit.step import SubjectConfig, fit_summary, fit_workspace, isolate_subject
 
 SUPERQUADRIC = FitConfig(body="superquadric")
 
@@ -53,6 +53,34 @@ def test_fit_recovers_pose_and_height_of_a_synthetic_cloud():
     assert _mean_joint_error_m(result.joints, truth) < 0.015  # the issue's 15 mm target
     assert result.shape.height == pytest.approx(1.9, rel=0.01)
     assert result.residual_median < 0.006  # 5 mm noise: |N(0, 5 mm)| has median 3.4 mm
+
+
+def test_an_unjudged_fit_is_the_judged_one_without_its_residuals(monkeypatch):
+    """``--no-judge`` (the tracker's start): the fit the acceptance test would pass, pose and
+    shape to the bit, its message saying it was not judged and no residuals, computed
+    nowhere (Open3D's mesh distances, whose import alone cost `mocap track` 1.5-2 s). With
+    every test off, the judged fit is the same one."""
+    import tracking.fit.body_fit as body_fit
+
+    points, truth = _scene(seed=4, height=1.9)
+    off = dict(body="superquadric", min_inlier_fraction=0.0, max_median_residual=1.0,
+               max_unexplained_cluster=1.0, min_limb_support=0.0, metric=False)
+    judged = fit_body(points, FitConfig(**off))
+
+    def no_distances(*args, **kwargs):
+        raise AssertionError("an unjudged fit computes no mesh distances")
+
+    monkeypatch.setattr(body_fit, "mesh_distances", no_distances)
+    unjudged = fit_body(points, FitConfig(body="superquadric", judge=False))
+    assert np.array_equal(unjudged.pose.params, judged.pose.params)
+    assert unjudged.shape == judged.shape and judged.message == "ok"
+    assert unjudged.message == "not judged (--no-judge)" and unjudged.success
+    assert np.isnan([unjudged.residual_median, unjudged.residual_rms,
+                     unjudged.inlier_fraction]).all()
+    assert _mean_joint_error_m(unjudged.joints, truth) < 0.015
+    # fit.json stays JSON: no residuals are null, not NaN.
+    written = json.loads(json.dumps(fit_summary(unjudged), allow_nan=False))
+    assert written["residual_median"] is None and written["inlier_fraction"] is None
 
 
 # Slow (~45 s under load): the full search over orientations on a sphere. The same behaviour,
