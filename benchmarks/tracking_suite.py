@@ -621,7 +621,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from _cli import SHARED_DATA  # benchmarks/ is on sys.path when a script here runs
+from _cli import SHARED_DATA, mocap  # benchmarks/ is on sys.path when a script here runs
 from tracking_synthetic import Case, synth_subject, track_case  # benchmarks/ is on sys.path
 
 CLIP_DIR = SHARED_DATA / "mocap_bvh"
@@ -689,11 +689,12 @@ def run_clip(
     clip_dir: Path = CLIP_DIR,
     repeats: int = 1,
     seed: int = 0,
+    warm_up: bool = False,
 ) -> dict[str, Case]:
     """Synthesise ``frames`` frames of ``clip`` (of ``clip_dir``; its silhouette noise drawn
     with ``seed``) into ``root/clip`` (``root/clip@seed`` for a seed other than 0) and track
     them with each of ``trackers``, ``repeats`` times each (`best_of`); their figures by
-    tracker."""
+    tracker. warm_up: first track the first two frames, untimed (`warm_up`)."""
     name = seeded(clip, seed)
     ws = root / name
     flags = ["--frames", str(frames), "--size", size, "--overwrite", "--seed", str(seed)]
@@ -702,7 +703,19 @@ def run_clip(
         clip_dir / CLIPS[clip],
         flags + (["--first-frame", str(start)] if start is not None else []),
     )
+    if warm_up:
+        warm(ws)
     return {t: best_of(ws, f"{name} / {t}", TRACKERS[t], repeats) for t in trackers}
+
+
+def warm(ws: Path) -> None:
+    """Track the first two frames of ``ws``, untimed: numba compiles the tracker's kernels
+    on a tree's first `mocap track` and caches them (15 s of a fresh tree's 32 for two frames
+    of the frame-150 jump, session 43), once per install; without this the suite's first
+    clip paid it, run from a fresh copy of the tree (its frames/s 10-20% low)."""
+    seconds = mocap("track", str(ws), "--overwrite", "--last", "1", echo=False)
+    print(f"warm-up    the first 2 frames tracked, untimed, in {seconds:.0f} s (numba compiles "
+          "and caches the kernels on a tree's first track)")
 
 
 def best_of(ws: Path, label: str, tracker: list[str], repeats: int) -> Case:
@@ -764,9 +777,11 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for clip in args.clips:
             for seed in args.seeds:
+                first = clip == args.clips[0] and seed == args.seeds[0]
                 for name, case in run_clip(args.keep or Path(tmp), clip, args.frames,
                                            starts[clip], args.trackers, args.size,
-                                           repeats=args.repeats, seed=seed).items():
+                                           repeats=args.repeats, seed=seed,
+                                           warm_up=first).items():
                     cases[seeded(clip, seed), name] = case
     fastest = f"; frames/s the fastest of {args.repeats} runs" if args.repeats > 1 else ""
     print(f"\n{args.frames} frames per clip, {args.size}{fastest}\n"

@@ -63,21 +63,22 @@ def test_an_unjudged_fit_is_the_judged_one_without_its_residuals(monkeypatch):
     import tracking.fit.body_fit as body_fit
 
     points, truth = _scene(seed=4, height=1.9)
-    off = dict(body="superquadric", min_inlier_fraction=0.0, max_median_residual=1.0,
-               max_unexplained_cluster=1.0, min_limb_support=0.0, metric=False)
-    judged = fit_body(points, FitConfig(**off))
+    quick = dict(body="superquadric", orientations=2, max_points=800)  # (the test's time)
+    judged = fit_body(points, FitConfig(**quick, min_inlier_fraction=0.0,
+                                        max_median_residual=1.0, max_unexplained_cluster=1.0,
+                                        min_limb_support=0.0, metric=False))
 
     def no_distances(*args, **kwargs):
         raise AssertionError("an unjudged fit computes no mesh distances")
 
     monkeypatch.setattr(body_fit, "mesh_distances", no_distances)
-    unjudged = fit_body(points, FitConfig(body="superquadric", judge=False))
+    unjudged = fit_body(points, FitConfig(**quick, judge=False))
     assert np.array_equal(unjudged.pose.params, judged.pose.params)
     assert unjudged.shape == judged.shape and judged.message == "ok"
     assert unjudged.message == "not judged (--no-judge)" and unjudged.success
     assert np.isnan([unjudged.residual_median, unjudged.residual_rms,
                      unjudged.inlier_fraction]).all()
-    assert _mean_joint_error_m(unjudged.joints, truth) < 0.015
+    assert _mean_joint_error_m(unjudged.joints, truth) < 0.02
     # fit.json stays JSON: no residuals are null, not NaN.
     written = json.loads(json.dumps(fit_summary(unjudged), allow_nan=False))
     assert written["residual_median"] is None and written["inlier_fraction"] is None
