@@ -571,7 +571,11 @@ its last good pose is no longer a frame tracked after the divergence at 46). Pos
 100/100 frames, median IoU 0.832. Speed: against the code before, in turn on the same
 frame-150 workspaces (A B B A), turn_pirouette 61.7 and 62.3 s before, 60.6 and 59.7 after
 (1.03x); the cartwheel 73.7 and 62.8 before, 70.1 and 63.3 after (its recovery at 57 is new).
-SPEED_150
+Nothing beside: frame 150 (with the two-frame warm-up) the cartwheel **0.79** frames/s (its
+start 30 s: the outline rows' second signature compiled in its timed run; tracked again alone
+in a warm tree, 64.7 s, 0.93 frames/s), turn_pirouette **0.99**, the other 10 1.29-1.80: not
+met on the two; seed 0 (the five-frame warm-up) 1.00-2.05 frames/s (turn_pirouette 1.00,
+cartwheel 1.21, bend_pickup 1.32, walk 1.93), every target PASS.
 
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
