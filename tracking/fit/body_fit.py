@@ -924,7 +924,7 @@ def fit_body(points: np.ndarray, config: FitConfig | None = None,
                 vertices = model_to_cloud * model.posed_vertices(pose)
                 cost = two_way_cost(vertices, points, problem.scale)
                 if not config.judge:
-                    ok, problems = True, [_NOT_JUDGED]
+                    ok, problems = True, []
             judged[x.tobytes()] = (ok, problems, outcome, cost)
         return judged[x.tobytes()]
 
@@ -1014,7 +1014,7 @@ def fit_body(points: np.ndarray, config: FitConfig | None = None,
     tried = verdicts(fits)
     verdict = min([v for v in tried if v[0]] or tried, key=lambda v: v[3])
     ok, problems, (pose, model, median, rms, inliers, model_to_cloud), _ = verdict
-    message = "; ".join((["ok"] if ok and config.judge else []) + problems)
+    message = "; ".join((["ok"] if ok else []) + problems) if config.judge else _NOT_JUDGED
     return FitResult(pose, model.shape, ok, message, median, rms, inliers, len(points),
                      time.perf_counter() - start, candidates, model, model_to_cloud)  # fmt: skip
 
@@ -1169,10 +1169,11 @@ def _unjudged(x: np.ndarray):
     """`_acceptance` of `FitConfig.judge` off: passed, no residuals (NaN). The mesh distances
     are Open3D's, whose import alone was 1.5-2 s of a `mocap track` that needs nothing else of
     it (its start's fit judges nothing)."""
-    return True, [_NOT_JUDGED], (*_superquadrics(x), np.nan, np.nan, np.nan)
+    return True, [], (*_superquadrics(x), np.nan, np.nan, np.nan)
 
 
 _NOT_JUDGED = "not judged (--no-judge)"
+"""The message of a fit made with `FitConfig.judge` off, whatever the body."""
 
 
 def _superquadrics(x: np.ndarray) -> tuple[Pose, BodyModel]:
