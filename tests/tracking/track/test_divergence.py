@@ -270,6 +270,52 @@ def test_a_recovery_gives_its_two_best_starts_more_passes(passes, enough_under, 
         TrackConfig(recovery_passes=0)
 
 
+@pytest.mark.parametrize(("enough_under", "known_shape", "batches", "winner"), [
+    # The extremities' best (11) is enough: the upright start 3, lower, is not refined.
+    (2.5, True, [[0, 9, 10, 11]], 11),
+    (0.05, True, [[0, 9, 10, 11], list(range(1, 9))], 3),  # none is enough: all refined
+    (None, True, [list(range(12))], 3),  # a start without `enough`: all at once, as before
+    (None, False, [list(range(12))], 3),  # the start that sets the shape
+])
+def test_a_recovery_refines_the_stances_only_when_the_hulls_own_starts_are_not_enough(
+        monkeypatch, enough_under, known_shape, batches, winner):
+    """`_start_search` with `enough` (a recovery) refines the visual hull's own starts first
+    (its fit 0 and its extremities' 9-11, together), and the stances (the upright starts 1-8)
+    only when none of those is enough. Without `enough` every start is refined in one call.
+    Stand-ins: start i refines to the score ``values[i]``, which is also its energy; no more
+    passes (`recovery_passes` 1)."""
+    import tracking.track.tracker as tracker_module
+    from tests.tracking.track.test_tracker import CAMERAS, SHAPE
+
+    values = [5.0, 4.0, 3.0, 0.1, 6.0, 7.0, 8.0, 9.0, 9.5, 2.0, 1.0, 0.2]
+
+    def tagged(index: int) -> Pose:
+        return Pose(np.r_[0.0, float(index), np.zeros(24)])
+
+    tracker = SilhouetteTracker(CAMERAS, TrackConfig(body="superquadric", recovery_passes=1),
+                                shape=SHAPE)  # fmt: skip
+    monkeypatch.setattr(tracker_module, "upright_starts",
+                        lambda fit, up, headings, pelvis: [tagged(i) for i in range(1, 9)])
+    tracker._best_hypothesis = lambda energy, x: tagged(0)
+    tracker._extremity_starts = lambda energy, points: [tagged(i) for i in (9, 10, 11)]
+    tracker._energy = lambda masks: (lambda pose, level=0: float(pose.params[0]))
+    tracker._objective = lambda energy, x, level: float(x[0])
+    refined_batches = []
+
+    def refine_starts(energy, starts):
+        indices = [int(p.params[1]) for p in starts]
+        refined_batches.append(indices)
+        return [np.r_[values[i], float(i), np.zeros(24)] for i in indices]
+
+    tracker._refine_starts = refine_starts
+    enough = None if enough_under is None else (lambda e: e < enough_under)
+    x, score, start, _ = tracker._start_search(
+        [], Pose(np.zeros(26)), np.zeros((10, 3)), np.array([0.0, 1.0, 0.0]), False,
+        known_shape, enough)  # fmt: skip
+    assert refined_batches == batches
+    assert int(x[1]) == winner and score == values[winner], start
+
+
 @pytest.mark.slow  # two start searches each: about a minute on 2 shared cores
 @pytest.mark.parametrize("floor_band_m", [0.0, TrackConfig().floor_band_m])
 def test_the_start_search_recovers_a_track_that_jumped(floor_band_m):
