@@ -577,6 +577,21 @@ in a warm tree, 64.7 s, 0.93 frames/s), turn_pirouette **0.99**, the other 10 1.
 met on the two; seed 0 (the five-frame warm-up) 1.00-2.05 frames/s (turn_pirouette 1.00,
 cartwheel 1.21, bend_pickup 1.32, walk 1.93), every target PASS.
 
+Session 44, the same AMD EPYC: a recovery's start search refines the visual hull's own starts
+(its fit and its extremities') first, and the upright starts only when none of those is
+already no divergence: of the 13 searches of recoveries in the three sets (seeds 0 and 1,
+frame 150), 3 ended there (the frame-150 turn_pirouette's shape pass at frame 5, seed 0's at
+39, cartwheel@1's at 26), each with the whole search's winner. The XOR count's culled faces
+(the renderer's default) have loops of their own: 1.10-1.15x the count on
+`benchmarks/xor_count.py`'s scene, the same integers. Figures: seed 0 (15 clips), seed 1 (6),
+frame 150 (12) and the Pose2Sim demo (100/100, median IoU 0.832) byte-identical. Speed, in
+turn against the code before on the same frame-150 workspaces (A B A B): turn_pirouette 55.1
+and 54.4 s before, 52.9 and 51.5 after (1.05x); the cartwheel, whose two searches find
+nothing (one more `fork_map` each), 57.3 and 55.4 before, 55.0 and 54.9 after. Nothing
+beside, at a fast hour (the seed-0 walk 2.00 frames/s against session 43's 1.93; kick from
+frame 150 2.28 against 1.59): frame 150 cartwheel 1.05, turn_pirouette 1.21, the other 10
+1.76-2.32; seed 0 1.26-2.26 (turn_pirouette 1.26, bend_pickup 1.35); every target PASS on both.
+
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
 with one other job, so frames/s are low bounds). MPJPE (offsets out), worst joint, frames/s,
