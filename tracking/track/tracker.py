@@ -865,13 +865,12 @@ class SilhouetteTracker:
         # took a search that found nothing 4.1 s against 3.1 for its 12 starts at once (the
         # frame-150 turn_pirouette's frame 20). The start that sets the shape refines all at
         # once.
-        groups = [picked]
-        if enough is not None:
-            groups = [[i for i in picked if not 0 < i < len(starts)],
-                      [i for i in picked if 0 < i < len(starts)]]
+        groups = [picked] if enough is None else [
+            [i for i in picked if not 0 < i < len(starts)],
+            [i for i in picked if 0 < i < len(starts)]]
         for k, group in enumerate(g for g in groups if g):
-            if k and enough is not None \
-                    and enough(energy(Pose(refined[int(np.argmin(scores))]))):
+            # (A second group exists only with `enough`.)
+            if k and enough(energy(Pose(refined[int(np.argmin(scores))]))):
                 break
             for i, y in zip(group, self._refine_starts(energy, [candidates[i] for i in group]),
                             strict=True):  # fmt: skip
