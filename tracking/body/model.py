@@ -161,6 +161,32 @@ LOWER_LIMITS: np.ndarray = np.array([p.lower for p in POSE_LAYOUT])
 UPPER_LIMITS: np.ndarray = np.array([p.upper for p in POSE_LAYOUT])
 LOWER_LIMITS.flags.writeable = False
 UPPER_LIMITS.flags.writeable = False
+WHOLE_TURN: np.ndarray = np.array([p.kind == "rotation" and p.upper - p.lower >= 2 * np.pi - 1e-9
+                                   for p in POSE_LAYOUT])
+"""The rotations whose range is a whole turn (-180..180 degrees): the root's roll, pitch and
+heading. Their range is where a stored angle lies, not how far the body may turn: a subject
+who spins turns through 180 degrees, and a search clipped there stops at the wall (the suite's
+turn_pirouette stuck at -180 for frames 36-39 and 56, then diverged; session 45). Searches
+move them freely (`SEARCH_LOWER_LIMITS`, `SEARCH_UPPER_LIMITS`), and `in_limits` brings their
+results back into the range."""
+SEARCH_LOWER_LIMITS: np.ndarray = np.where(WHOLE_TURN, -np.inf, LOWER_LIMITS)
+SEARCH_UPPER_LIMITS: np.ndarray = np.where(WHOLE_TURN, np.inf, UPPER_LIMITS)
+"""The bounds of a search over the pose parameters: the joint limits, the whole turns free."""
+for _array in (WHOLE_TURN, SEARCH_LOWER_LIMITS, SEARCH_UPPER_LIMITS):
+    _array.flags.writeable = False
+
+
+def in_limits(params: np.ndarray) -> np.ndarray:
+    """`params` (..., `N_POSE_PARAMS`) as a stored pose has them: each joint angle clipped to
+    its limits, each `WHOLE_TURN` angle brought into -180..180 degrees (the same rotation)."""
+    params = np.asarray(params, dtype=float)
+    return np.where(WHOLE_TURN, turn_difference(params, 0.0),
+                    np.clip(params, LOWER_LIMITS, UPPER_LIMITS))
+
+
+def turn_difference(a: np.ndarray, b: np.ndarray | float) -> np.ndarray:
+    """a - b for angles in radians, brought into [-pi, pi): the shorter way round."""
+    return np.mod(np.asarray(a) - b + np.pi, 2.0 * np.pi) - np.pi
 
 _ROT_PARAMS = np.array([i for i, p in enumerate(POSE_LAYOUT) if p.kind == "rotation"])
 _ROT_AXES = np.array([POSE_LAYOUT[i].axis for i in _ROT_PARAMS])
@@ -260,8 +286,8 @@ class Pose:
         return {p.name: float(v) for p, v in zip(POSE_LAYOUT, self.params, strict=True)}
 
     def clamped(self) -> Pose:
-        """The nearest pose inside the joint limits (per parameter)."""
-        return Pose(np.clip(self.params, LOWER_LIMITS, UPPER_LIMITS))
+        """The nearest pose inside the joint limits (per parameter; `in_limits`)."""
+        return Pose(in_limits(self.params))
 
     def violations(self) -> tuple[LimitViolation, ...]:
         """Parameters outside their limits, in layout order (empty when the pose is valid)."""

@@ -30,10 +30,10 @@ import numpy as np
 
 from recon.cameras import Camera
 from tracking.body.model import (
-    LOWER_LIMITS,
     PARAM_MOVES_NODE,
     POSE_LAYOUT,
-    UPPER_LIMITS,
+    SEARCH_LOWER_LIMITS,
+    SEARCH_UPPER_LIMITS,
     Pose,
     TrackedModel,
     pose_derivative_axes,
@@ -259,7 +259,7 @@ class ContourRefiner:
         Returns the parameters, their energy and the number of energy evaluations.
         """
         free = np.asarray(free)
-        x = np.clip(np.asarray(x, float).copy(), LOWER_LIMITS, UPPER_LIMITS)
+        x = np.clip(np.asarray(x, float).copy(), SEARCH_LOWER_LIMITS, SEARCH_UPPER_LIMITS)
         best = energy(x)
         evaluations = 1
         lam = 1e-2
@@ -275,8 +275,9 @@ class ContourRefiner:
                 centre, weight = prior
                 a = a + np.diag(weight[free])
                 b = b + weight[free] * (x[free] - centre[free])
-            values, best, lam, n = _accepted_step(a, b, x[free], (LOWER_LIMITS[free],
-                                                  UPPER_LIMITS[free]), lam, best, cost)  # fmt: skip
+            values, best, lam, n = _accepted_step(
+                a, b, x[free], (SEARCH_LOWER_LIMITS[free], SEARCH_UPPER_LIMITS[free]), lam,
+                best, cost)  # fmt: skip
             evaluations += n
             if values is None:
                 break
@@ -305,11 +306,12 @@ def refine_shape(base: TrackedModel, frames: Sequence[tuple[Sequence[Camera],
     outlines = [_FrameOutlines(c, m, cfg, k) for c, m, k in frames]
     params = base.shape_parameters()
     values = np.asarray(params.values, float).copy()
-    poses = [np.clip(np.asarray(x, float), LOWER_LIMITS, UPPER_LIMITS) for x in poses]
-    n_shape, n_pose = len(values), len(LOWER_LIMITS)
+    poses = [np.clip(np.asarray(x, float), SEARCH_LOWER_LIMITS, SEARCH_UPPER_LIMITS)
+             for x in poses]
+    n_shape, n_pose = len(values), len(SEARCH_LOWER_LIMITS)
     free = np.arange(n_pose) if free is None else np.asarray(free)
-    lo = np.concatenate([params.lower, np.tile(LOWER_LIMITS, len(poses))])
-    hi = np.concatenate([params.upper, np.tile(UPPER_LIMITS, len(poses))])
+    lo = np.concatenate([params.lower, np.tile(SEARCH_LOWER_LIMITS, len(poses))])
+    hi = np.concatenate([params.upper, np.tile(SEARCH_UPPER_LIMITS, len(poses))])
     h = params.step
 
     def split(z: np.ndarray) -> tuple[TrackedModel, list[np.ndarray]]:

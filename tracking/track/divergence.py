@@ -57,7 +57,9 @@ class XorWatch:
         self.start: float | None = None  # the XOR of the last restart's pose
         self.diverged: tuple[int, float] | None = None
         """The first divergence not yet behind the track (`diverge`): its frame, and the high
-        bar of the reference before it; None after a start, a recovery or `returned`."""
+        bar of the reference before it (or the absolute bar a start was over); None after a
+        start, a recovery or `returned`."""
+        self._start_over_bar = False  # `diverged` is a start over the absolute bar
 
     def reference(self) -> float | None:
         """Median XOR fraction of the accepted frames; until there are `MIN_REFERENCE_FRAMES`,
@@ -114,20 +116,29 @@ class XorWatch:
         self.accepted.clear()
         self.streak = 0
         self.start = xor_fraction
-        self.diverged = None
+        self.diverged, self._start_over_bar = None, False
         if xor_fraction is not None:
             self.accepted.append(xor_fraction)
 
-    def diverge(self, frame: int, xor_fraction: float) -> None:
+    def diverge(self, frame: int, xor_fraction: float, absolute: float | None = None) -> None:
         """A divergence the start search found nothing better for: what the model reaches now
         is the reference from here (`restart`), and the high bar of the reference before it
-        is kept for `returned` (the first divergence's, until the track is back under it)."""
-        kept = self.diverged
+        is kept for `returned` (the first divergence's, until the track is back under it).
+        absolute: a start over this absolute bar (an XOR fraction), which is the bar to be
+        back under (a start has no reference before it)."""
+        kept, over = self.diverged, self._start_over_bar
         if kept is None:
-            bar = self.bar(self.config.high_factor)
-            kept = None if bar is None else (frame, bar)
+            bar = self.bar(self.config.high_factor) if absolute is None else absolute
+            kept, over = (None if bar is None else (frame, bar)), absolute is not None
         self.restart(xor_fraction)
-        self.diverged = kept
+        self.diverged, self._start_over_bar = kept, over
+
+    def bar_words(self) -> str:
+        """What the bar of `diverged` is, for an event's text."""
+        assert self.diverged is not None
+        if self._start_over_bar:
+            return f"the absolute bar, which the start at frame {self.diverged[0]} was over"
+        return f"this subject's usual XOR before the divergence at frame {self.diverged[0]}"
 
     def returned(self, xor_fraction: float) -> tuple[int, float] | None:
         """After a `diverge`, whether a tracked frame of this XOR fraction is back under the
@@ -136,4 +147,5 @@ class XorWatch:
         if self.diverged is None or xor_fraction > self.diverged[1]:
             return None
         back, self.diverged = self.diverged, None
+        self._start_over_bar = False
         return back

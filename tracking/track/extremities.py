@@ -22,15 +22,16 @@ import numpy as np
 
 from tracking.body.bvh import rotations_to_channels
 from tracking.body.model import (
-    LOWER_LIMITS,
     N_POSE_PARAMS,
     NODE_INDEX,
     PARAM_INDEX,
     PARAM_MOVES_NODE,
-    UPPER_LIMITS,
+    SEARCH_LOWER_LIMITS,
+    SEARCH_UPPER_LIMITS,
     BodyShape,
     Pose,
     forward_kinematics,
+    in_limits,
     pose_derivative_axes,
 )
 
@@ -183,7 +184,7 @@ def pose_from_extremities(ends: HullExtremities, assignment: Assignment, shape: 
     head, feet = targets[0], targets[-2:]
     pelvis_index = NODE_INDEX["pelvis"]
     free = np.asarray(free)
-    lower, upper = LOWER_LIMITS[free], UPPER_LIMITS[free]
+    lower, upper = SEARCH_LOWER_LIMITS[free], SEARCH_UPPER_LIMITS[free]
 
     def params(values: np.ndarray) -> np.ndarray:
         x = np.zeros(N_POSE_PARAMS)
@@ -226,7 +227,7 @@ def pose_from_extremities(ends: HullExtremities, assignment: Assignment, shape: 
         if best is None or solution.cost < best[0]:
             best = (float(solution.cost), solution.x)
     assert best is not None
-    x = np.clip(params(best[1]), LOWER_LIMITS, UPPER_LIMITS)
+    x = in_limits(params(best[1]))
     world = forward_kinematics(Pose(x), shape)
     rms = float(np.sqrt(np.mean(np.sum((world[sites, :3, 3] - targets) ** 2, axis=1))))
     return Pose(x), rms

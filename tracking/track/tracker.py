@@ -50,7 +50,9 @@ pose given by the user replaces this ("model alignment", thesis 6.2.4).
 
 A frame whose energy stays above `max_xor_fraction` of the silhouette area (or 1.5 times the
 lowest XOR of an initialisation, when real silhouettes with holes and ghosts set a higher
-floor) is a divergence. So is one far above what the model reached on this subject
+floor) is a divergence; a start over `max_xor_fraction` is one too ("diverged", its XOR no
+reference; the search runs again every `_SEARCH_AGAIN_FRAMES` frames while over it). So is one
+far above what the model reached on this subject
 (`tracking.track.divergence.XorWatch`: `spike_xor_factor` times the median XOR of the recent
 tracked frames, or `high_xor_factor` times it for `high_xor_frames` frames in a row), which the
 absolute bar lets through when the model fits the subject well. On a divergence the start
@@ -123,13 +125,18 @@ from tracking.body.model import (
     NODE_NAMES,
     PARAM_INDEX,
     PARAM_MOVES_NODE,
+    SEARCH_LOWER_LIMITS,
+    SEARCH_UPPER_LIMITS,
     UPPER_LIMITS,
+    WHOLE_TURN,
     BodyModel,
     BodyShape,
     Pose,
     TrackedModel,
     forward_kinematics,
+    in_limits,
     root_rotation,
+    turn_difference,
 )
 from tracking.body.motion import zxy_twin
 from tracking.rig.cameras import rig_up
@@ -347,7 +354,7 @@ class TrackConfig:
     max_xor_fraction: float = field(
         default=0.35,
         metadata={"help": "a frame whose XOR area exceeds this fraction of the silhouette "
-                  "area is a divergence: re-initialise"},
+                  "area is a divergence, the start's too: re-initialise"},
     )  # fmt: skip
     spike_xor_factor: float = field(
         default=SPIKE_XOR_FACTOR,
@@ -621,7 +628,7 @@ class _StageEnergy:
     def params(self, values: np.ndarray) -> np.ndarray:
         x = self.base.copy()
         x[self.free] = values
-        return np.clip(x, LOWER_LIMITS, UPPER_LIMITS)
+        return np.clip(x, SEARCH_LOWER_LIMITS, SEARCH_UPPER_LIMITS)
 
     def __call__(self, values: np.ndarray) -> float:
         self.evaluations += 1
@@ -765,7 +772,7 @@ class SilhouetteTracker:
         message, self._start_event = self._start_event or "init from the given pose", ""
         x = self._refine_all(self._energy(masks), init.params.copy(), init=True)
         self.history = []
-        return Pose(x), message
+        return Pose(in_limits(x)), message
 
     def _initialise_from_hull(self, masks: Sequence[np.ndarray],
                               enough: Callable[[float], bool] | None = None,
@@ -816,7 +823,7 @@ class SilhouetteTracker:
             x, swapped = self._winner_swapped(energy, x, score)
         message = f"init from visual hull ({len(points)} surface voxels; {start}{swapped})"
         self.history = []
-        return Pose(x), message
+        return Pose(in_limits(x)), message
 
     def _start_search(self, masks: Sequence[np.ndarray], fit: Pose, points: np.ndarray,
                       up: np.ndarray | None, bent: bool, known_shape: bool,
@@ -1144,8 +1151,8 @@ class SilhouetteTracker:
         self.history, self._last_good, self._lost_since = [], None, None
         self._gap_statuses, self._tracked_any = set(), False
         self.watch.restart()
-        return Pose(self._refine_all(self._energy(picked[0][0]), poses[0].params.copy(),
-                                     init=True))
+        return Pose(in_limits(self._refine_all(self._energy(picked[0][0]),
+                                               poses[0].params.copy(), init=True)))
 
     def refine(self, masks: Sequence[np.ndarray], pose: Pose, *, passes: int = 2,
                shape: bool = False) -> Pose:  # fmt: skip
@@ -1162,7 +1169,7 @@ class SilhouetteTracker:
         energy = self._energy(masks)
         for _ in range(passes):
             x = self._refine_all(energy, x, init=True)
-        return Pose(x)
+        return Pose(in_limits(x))
 
     # -- tracking -------------------------------------------------------------------------
     def _energy(self, masks: Sequence[np.ndarray]) -> SilhouetteEnergy:
@@ -1172,17 +1179,22 @@ class SilhouetteTracker:
                                 missed=self._frame_hull(masks)[2])  # fmt: skip
 
     def _prediction(self) -> tuple[np.ndarray, np.ndarray]:
-        """Constant-velocity prediction and the per-parameter change of the last two frames."""
+        """Constant-velocity prediction and the per-parameter change of the last two frames
+        (a whole turn's the shorter way round: the stored angles wrap at 180 degrees, and the
+        prediction goes on past it)."""
         if len(self.history) >= 2:
-            change = self.history[-1] - self.history[-2]
-            return np.clip(self.history[-1] + change, LOWER_LIMITS, UPPER_LIMITS), np.abs(change)
+            change = np.where(WHOLE_TURN, turn_difference(self.history[-1], self.history[-2]),
+                              self.history[-1] - self.history[-2])
+            return (np.clip(self.history[-1] + change, SEARCH_LOWER_LIMITS, SEARCH_UPPER_LIMITS),
+                    np.abs(change))
         return self.history[-1].copy(), np.zeros(N_POSE_PARAMS)
 
     def _stage(self, energy: SilhouetteEnergy, x: np.ndarray, free: Sequence[int],
                steps: np.ndarray, level: int, evals: int | None = None) -> np.ndarray:  # fmt: skip
         stage = _StageEnergy(energy, x, free, level, self._prior)
         free = list(free)
-        values = _simplex(stage, x[free], steps, LOWER_LIMITS[free], UPPER_LIMITS[free],
+        values = _simplex(stage, x[free], steps, SEARCH_LOWER_LIMITS[free],
+                          SEARCH_UPPER_LIMITS[free],
                           evals or self.config.simplex_evals)  # fmt: skip
         self.evaluations += stage.evaluations
         return stage.params(values)
@@ -1397,14 +1409,14 @@ class SilhouetteTracker:
             share = self.unexplained_share(masks, result.pose)
             result = dataclasses.replace(result, unexplained_share=share,
                                          unexplained=share > limit)
+            words = self.watch.bar_words() if self.watch.diverged is not None else ""
             back = (self.watch.returned(result.xor_fraction) if result.status == "tracked"
                     and not result.unexplained and not self._backwards else None)
             if back is not None:
                 # The track found again after a divergence the start search found nothing
                 # better for: back to this subject's usual XOR, and the hull explained.
                 event = (f"recovered: XOR {result.xor_fraction:.1%} of the silhouette, back "
-                         f"under {back[1]:.1%} (this subject's usual XOR before the divergence "
-                         f"at frame {back[0]}), with the visual hull explained")
+                         f"under {back[1]:.1%} ({words}), with the visual hull explained")
                 result = dataclasses.replace(
                     result, status="recovered",
                     event=_events(event, result.event))
@@ -1434,6 +1446,8 @@ class SilhouetteTracker:
             if results[i].pose is None or results[i].status not in ("init", "tracked"):
                 break
             opening.append(i)
+        if not opening:  # a start over the absolute bar: "diverged" (`track_back_gap`)
+            return {}
         xor = [results[i].xor_fraction for i in opening]
         anchor = opening[int(np.argmin(xor))]
         if anchor == first or xor[0] <= factor * min(xor):
@@ -1749,6 +1763,22 @@ class SilhouetteTracker:
                 return self._lost(frame, e, area, start, f"the start search after frames "
                                   f"{self._lost_since}-{frame - 1} found nothing under the "
                                   f"absolute bar {limit / area:.0%} (XOR {e / area:.1%})")
+            absolute = self.config.max_xor_fraction
+            if (event and self._lost_since is None and not self._starting
+                    and not self._backwards and e > absolute * area):  # fmt: skip
+                # A start over the absolute bar: the search found no pose the silhouettes
+                # allow, and its XOR must not set this subject's reference (the frame-150
+                # cartwheels of the suite started at 35-47% XOR, 200-300 mm off, and were
+                # tracked so, unflagged; session 45). Not trusted: "diverged", and the
+                # search runs again every few frames while over the bar (then "recovered",
+                # and the frames before it tracked back from there).
+                status = "diverged"
+                event = (f"diverged: {event}, XOR {e / area:.1%} of the silhouette, over the "
+                         f"absolute bar {absolute:.0%}: its pose is kept, not trusted, and the "
+                         f"start search runs again every {_SEARCH_AGAIN_FRAMES} frames while "
+                         "over it")
+            else:
+                absolute = None
             if not event:
                 if e > limit:
                     why = (f"XOR {e / area:.1%} of the silhouette, over the absolute bar "
@@ -1815,11 +1845,10 @@ class SilhouetteTracker:
                 # (Tracked, such a frame was trusted: the superquadric walk of
                 # test_the_start_search_recovers_a_track_that_jumped diverged at frame 6 with a
                 # pose 504 mm off at 11.9% XOR, and frame 7 was "tracked" at 502 mm, 13.3%.)
-                since, bar = self.watch.diverged
+                bar = self.watch.diverged[1]
                 status, still = "diverged", True
                 event = _events(f"diverged: XOR {e / area:.1%} of the silhouette, still over "
-                                f"{bar:.1%} (this subject's usual XOR before the divergence at "
-                                f"frame {since})", event)
+                                f"{bar:.1%} ({self.watch.bar_words()})", event)
             elif status == "init" and self._lost_since is not None:
                 status = "recovered"
                 gap = " or ".join(_GAP_WORDS[s] for s in sorted(self._gap_statuses))
@@ -1827,9 +1856,10 @@ class SilhouetteTracker:
                          f"{event}")
         except TrackingLost as exc:
             return self._lost(frame, float("nan"), area, start, str(exc), status=exc.status)
+        x = in_limits(x)  # a whole turn's angle back in -180..180 (the same pose)
         if status == "diverged" and not still:
             # The level the model now reaches: the reference from here (`XorWatch.diverge`).
-            self.watch.diverge(frame, e / area)
+            self.watch.diverge(frame, e / area, absolute)
         elif status == "init" or self._lost_since is not None:
             self.watch.restart(e / area)  # a new start
         else:
@@ -2049,7 +2079,7 @@ def upright_starts(fit: Pose, up: np.ndarray | None, headings: int,
         for side, sign in (("l", 1.0), ("r", -1.0)):
             x[PARAM_INDEX[f"{side}_shoulder_rz"]] = np.deg2rad(10.0) * sign
             x[PARAM_INDEX[f"{side}_elbow_flex"]] = np.deg2rad(10.0)
-        starts.append(Pose(np.clip(x, LOWER_LIMITS, UPPER_LIMITS)))
+        starts.append(Pose(in_limits(x)))
     return starts
 
 
@@ -2080,7 +2110,7 @@ def crouched_starts(fit: Pose, up: np.ndarray, headings: int) -> list[Pose]:
             x[PARAM_INDEX[f"{side}_hip_rx"]] = c["hip_rx"]
             x[PARAM_INDEX[f"{side}_hip_rz"]] = sign * c["hip_rz"]
             x[PARAM_INDEX[f"{side}_knee_flex"]] = c["knee_flex"]
-        starts.append(Pose(np.clip(x, LOWER_LIMITS, UPPER_LIMITS)))
+        starts.append(Pose(in_limits(x)))
     return starts
 
 

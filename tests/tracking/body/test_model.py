@@ -10,22 +10,30 @@ from tracking.body.bvh import rotations_to_channels
 from tracking.body.model import (
     JOINT_NAMES,
     LEGACY_POSE_PARAMS,
+    LOWER_LIMITS,
     N_POSE_PARAMS,
     NODE_INDEX,
     NODE_NAMES,
     NODE_PARENTS,
+    PARAM_INDEX,
     PARAM_MOVES_NODE,
     POSE_LAYOUT,
+    SEARCH_LOWER_LIMITS,
+    SEARCH_UPPER_LIMITS,
+    UPPER_LIMITS,
+    WHOLE_TURN,
     BodyModel,
     BodyShape,
     Pose,
     forward_kinematics,
+    in_limits,
     node_positions_in_world,
     pose_derivative_axes,
     pose_in_frame,
     rest_offsets,
     root_rotation,
     superquadric,
+    turn_difference,
 )
 
 SHAPE = BodyShape.default(1.75)
@@ -78,6 +86,35 @@ def test_pose_dict_round_trip_and_unknown_name() -> None:
         Pose(np.zeros(23))
     with pytest.raises(ValueError):
         pose.params[0] = 1.0  # read-only
+
+
+def test_whole_turns_wrap_and_joint_angles_clip_into_their_ranges() -> None:
+    # The root's roll, pitch and heading are the whole turns: a search moves them past 180
+    # degrees (a subject spins), and a stored pose has them in -180..180.
+    assert [p.name for p, whole in zip(POSE_LAYOUT, WHOLE_TURN, strict=True) if whole] == [
+        "root_rz", "root_rx", "root_ry"]
+    assert np.all(np.isinf(SEARCH_LOWER_LIMITS[WHOLE_TURN]))
+    assert np.array_equal(SEARCH_LOWER_LIMITS[~WHOLE_TURN], LOWER_LIMITS[~WHOLE_TURN])
+    assert np.array_equal(SEARCH_UPPER_LIMITS[~WHOLE_TURN], UPPER_LIMITS[~WHOLE_TURN])
+    x = Pose.from_dict({"root_ry": np.radians(200.0), "root_rz": np.radians(-530.0),
+                        "root_rx": np.radians(90.0), "l_elbow_flex": 3.0,
+                        "root_tx": 100.0}).params.copy()
+    y = Pose(in_limits(x))
+    assert np.degrees(y.as_dict()["root_ry"]) == pytest.approx(-160.0)
+    assert np.degrees(y.as_dict()["root_rz"]) == pytest.approx(-170.0)
+    assert np.degrees(y.as_dict()["root_rx"]) == pytest.approx(90.0)
+    assert y.as_dict()["l_elbow_flex"] == pytest.approx(np.radians(150.0))
+    assert y.as_dict()["root_tx"] == 100.0
+    assert y.violations() == ()
+    assert np.array_equal(Pose(x).clamped().params, y.params)
+    # The same rotation: the body does not move.
+    x[PARAM_INDEX["l_elbow_flex"]] = 1.0
+    assert np.allclose(forward_kinematics(Pose(x), SHAPE),
+                       forward_kinematics(Pose(in_limits(x)), SHAPE))
+    assert np.degrees(turn_difference(np.radians(-170.0), np.radians(170.0))) == pytest.approx(
+        20.0)
+    assert np.degrees(turn_difference(np.radians(170.0), np.radians(-170.0))) == pytest.approx(
+        -20.0)
 
 
 def test_clamp_and_violations() -> None:
