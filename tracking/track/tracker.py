@@ -1764,21 +1764,20 @@ class SilhouetteTracker:
                                   f"{self._lost_since}-{frame - 1} found nothing under the "
                                   f"absolute bar {limit / area:.0%} (XOR {e / area:.1%})")
             absolute = self.config.max_xor_fraction
-            if (event and self._lost_since is None and not self._starting
-                    and not self._backwards and e > absolute * area):  # fmt: skip
+            start_over_bar = (bool(event) and self._lost_since is None and not self._starting
+                              and not self._backwards and e > absolute * area)  # fmt: skip
+            if start_over_bar:
                 # A start over the absolute bar: the search found no pose the silhouettes
                 # allow, and its XOR must not set this subject's reference (the frame-150
-                # cartwheels of the suite started at 35-47% XOR, 200-300 mm off, and were
-                # tracked so, unflagged; session 45). Not trusted: "diverged", and the
-                # search runs again every few frames while over the bar (then "recovered",
-                # and the frames before it tracked back from there).
+                # cartwheels of the suite started at 35-47% XOR, 200-330 mm off, and with the
+                # bar at 1.5 times that were tracked so; session 45). Not trusted: "diverged",
+                # and the search runs again every few frames while over the bar (then
+                # "recovered", and the frames before it tracked back from there).
                 status = "diverged"
                 event = (f"diverged: {event}, XOR {e / area:.1%} of the silhouette, over the "
                          f"absolute bar {absolute:.0%}: its pose is kept, not trusted, and the "
                          f"start search runs again every {_SEARCH_AGAIN_FRAMES} frames while "
                          "over it")
-            else:
-                absolute = None
             if not event:
                 if e > limit:
                     why = (f"XOR {e / area:.1%} of the silhouette, over the absolute bar "
@@ -1859,7 +1858,8 @@ class SilhouetteTracker:
         x = in_limits(x)  # a whole turn's angle back in -180..180 (the same pose)
         if status == "diverged" and not still:
             # The level the model now reaches: the reference from here (`XorWatch.diverge`).
-            self.watch.diverge(frame, e / area, absolute)
+            self.watch.diverge(frame, e / area,
+                               self.config.max_xor_fraction if start_over_bar else None)
         elif status == "init" or self._lost_since is not None:
             self.watch.restart(e / area)  # a new start
         else:
