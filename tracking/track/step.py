@@ -50,7 +50,7 @@ import dataclasses
 import functools
 import io
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -166,6 +166,22 @@ class HeldMasks:
         return masks
 
 
+class FramesRead(Sequence[list[np.ndarray]]):
+    """The silhouettes of `frames` (`masks_of`), read each time they are asked for and not
+    held: a shape pass reads up to twice its frames (`calibrate_shape`), 400 MB a pass at
+    1920x1080 from 8 cameras."""
+
+    def __init__(self, frames: Sequence[int], masks_of: Callable[[int], list[np.ndarray]]
+                 ) -> None:  # fmt: skip
+        self.frames, self.masks_of = list(frames), masks_of
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def __getitem__(self, index):  # type: ignore[override]  # (an index, not a slice)
+        return self.masks_of(self.frames[index])
+
+
 def _read_mask(path: Path, camera: Any) -> np.ndarray:
     mask = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
     if mask is None:
@@ -249,12 +265,15 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
     with (Timer() as timer, _Recorder(ws, upright, frame_rate, logged) as recorder,
           single_blas_thread()):
         if init_model is None and config.shape_frames > 1:
-            shape_frames = frames[first:first + config.shape_frames]
-            bar = progress_bar(len(shape_frames), "shape", "frame", enabled=progress)
+            # (A start over the bar moves the pass on, up to `shape_frames` - 1 frames: those
+            # are read too, `calibrate_shape`.)
+            shape_frames = frames[first:first + 2 * config.shape_frames - 1]
+            bar = progress_bar(min(len(shape_frames), config.shape_frames), "shape", "frame",
+                               enabled=progress)
             try:
                 with shape_pass:
                     init_pose = tracker.calibrate_shape(
-                        [masks_of(f) for f in shape_frames], progress=bar.update,
+                        FramesRead(shape_frames, masks_of), progress=bar.update,
                         frames=shape_frames)
             except TrackingLost as exc:
                 raise UserError(f"cannot start tracking at frame {frames[first]}: {exc}"
@@ -365,7 +384,11 @@ def _short_shape_pass(config: TrackConfig, frames: list[int], used: list[int]) -
         return []
     names = ", ".join(str(frames[i]) for i in used)
     why = (f"the sequence has {len(frames)} frames for --shape-frames {config.shape_frames}"
-           if len(frames) < config.shape_frames
+           if len(frames) < config.shape_frames else
+           f"the sequence has {len(frames) - used[0]} frames from frame {frames[used[0]]}, "
+           f"where the shape pass started (the start search before it was over the bar), "
+           f"for --shape-frames {config.shape_frames}"
+           if len(frames) - used[0] < config.shape_frames
            else f"the shape pass lost the subject after frame {frames[used[-1]]}")
     return [f"{why}: the body's shape comes from {len(used)} pose(s) (frame(s) {names}) "
             f"instead of {full}, and is less certain; track a longer sequence, or give a known "

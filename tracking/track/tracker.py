@@ -409,7 +409,9 @@ class TrackConfig:
         default=24,
         metadata={"help": "frames of the shape pass before tracking when the shape is "
                   "unknown: they are tracked, then the segment lengths are refined over every "
-                  "--shape-stride-th of them at once (<= 1: the first frame's shape only)"},
+                  "--shape-stride-th of them at once (<= 1: the first frame's shape only); a "
+                  "start over --max-xor-fraction moves the pass to the first of every 3rd "
+                  "frame whose start is under it"},
     )  # fmt: skip
     shape_stride: int = field(
         default=4, metadata={"help": "frame stride of the shape pass's joint refinement"}
@@ -1093,16 +1095,26 @@ class SilhouetteTracker:
 
     def calibrate_shape(self, sequence: Sequence[Sequence[np.ndarray]],
                         progress: Callable[[], object] | None = None,
-                        frames: Sequence[int] | None = None) -> Pose:
+                        frames: Sequence[int] | None = None) -> Pose | None:
         """The subject's shape from the first frames of a sequence (masks per frame), before
-        tracking it: the first frame is initialised (with its own shape estimate), the others
-        up to the last `shape_stride`-th are tracked, and every `shape_stride`-th one's pose is
-        refined together with the segment lengths, which the silhouettes of several poses
-        tell apart better than one.
-        Returns the first frame's pose with that shape; the tracker then starts afresh from it
-        and its event says how it was found (not "the given pose"). frames: the frame numbers
-        of `sequence` (default 0, 1, ...), by which a recovery in these frames later finds
-        the pose the pass gave it (`_recover`)."""
+        tracking it: a frame is initialised (with its own shape estimate), the frames after it
+        up to the last `shape_stride`-th of `shape_frames` are tracked, and every
+        `shape_stride`-th one's pose is refined together with the segment lengths, which the
+        silhouettes of several poses tell apart better than one.
+
+        That frame is the first, unless its start is over the absolute bar
+        (`max_xor_fraction`): a shape from a pose the silhouettes do not allow is wrong, and
+        so is every pose after it. The start search then runs again, each time with a shape
+        of its own, every `_SEARCH_AGAIN_FRAMES` frames of the first `shape_frames` until one
+        is under the bar (else the lowest wins), and the pass runs from there (`sequence` may
+        hold the frames it needs past the first `shape_frames`). The pose so found is then
+        tracked back to the first frame with the pass's shape (`_tracked_to_start`).
+
+        Returns the first frame's pose with that shape (None: the track back did not reach
+        it under the bar, and the first frame's start is searched with the shape); the
+        tracker then starts afresh from it and its event says how it was found (not "the
+        given pose"). frames: the frame numbers of `sequence` (default 0, 1, ...), by which a
+        recovery in these frames later finds the pose the pass gave it (`_recover`)."""
         if self.shape is not None:
             raise ValueError("the shape is already known")
         with self._searching_start():
@@ -1111,48 +1123,102 @@ class SilhouetteTracker:
 
     def _calibrate_shape(self, sequence: Sequence[Sequence[np.ndarray]],
                          progress: Callable[[], object] | None, frames: Sequence[int],
-                         ) -> Pose:  # fmt: skip
+                         ) -> Pose | None:  # fmt: skip
         """`calibrate_shape` (the start's parameters held)."""
         cfg = self.config
         stride = max(cfg.shape_stride, 1)
-        # The frames after the last one refined tell the shape nothing: not tracked (3 of the
-        # default 24, about 0.8 s of a start).
-        needed = sequence[:(len(sequence) - 1) // stride * stride + 1]
-        results: list[FrameResult] = []
-        for index, masks in enumerate(needed):
-            result = self.track(index, masks)
-            if index == 0:
-                self._start_event = f"{result.event}; segment lengths from the first frames"
+        first, results = self._pass_start(sequence, frames)
+        if progress is not None:
+            progress()
+        # The pass's frames from its start; those after the last one refined tell the shape
+        # nothing: not tracked (3 of the default 24, about 0.8 s of a start).
+        length = min(max(cfg.shape_frames, 1), len(sequence) - first)
+        needed = (length - 1) // stride * stride + 1
+        for index in range(first + 1, first + needed):
+            result = self.track(index, sequence[index])
             if progress is not None:
                 progress()
             if result.pose is None:
-                if index == 0:
-                    raise TrackingLost(result.event.removeprefix("lost: "))
                 break
             results.append(result)
         else:  # the frames not needed are done too
-            for _ in sequence[len(needed):] if progress is not None else ():
+            for _ in range(length - needed) if progress is not None else ():
                 progress()
         # A start gone wrong is found from the frames after it: the shape comes from those.
-        back = self.track_back(results, lambda index: needed[index])
+        back = self.track_back(results, lambda index: sequence[index])
         if 0 in back:
             self._start_event += f", the first {max(back) + 1} tracked back"
         results = [back.get(i, r) for i, r in enumerate(results)]
-        self._shape_pass_poses = {frames[i]: r.pose.params for i, r in enumerate(results)
+        self._shape_pass_poses = {frames[r.frame]: r.pose.params for r in results
                                   if r.pose is not None and not r.unexplained
                                   and r.status in ("init", "tracked", "recovered")}
-        picked = [(needed[i], r.pose) for i, r in enumerate(results) if i % stride == 0]
+        picked = [r for i, r in enumerate(results) if i % stride == 0]
         # Which frames of `sequence` (indices) the shape came from: fewer than a full pass's
         # when the sequence is short or the pass lost the subject (`mocap track` warns).
-        self.shape_frames_used = [i for i in range(len(sequence)) if i % stride == 0
-                                  ][:len(picked)]  # fmt: skip
-        poses = self._refine_shape([m for m, _ in picked], [p for _, p in picked])
+        self.shape_frames_used = [r.frame for r in picked]
+        poses = self._refine_shape([sequence[r.frame] for r in picked], [r.pose for r in picked])
+        x = self._refine_all(self._energy(sequence[first]), poses[0].params.copy(), init=True)
+        if first:
+            x = self._tracked_to_start(sequence, frames, first, x)
         # Tracking starts afresh from the first frame: nothing of the pass is a reference.
         self.history, self._last_good, self._lost_since = [], None, None
         self._gap_statuses, self._tracked_any = set(), False
         self.watch.restart()
-        return Pose(in_limits(self._refine_all(self._energy(picked[0][0]),
-                                               poses[0].params.copy(), init=True)))
+        return None if x is None else Pose(in_limits(x))
+
+    def _pass_start(self, sequence: Sequence[Sequence[np.ndarray]], frames: Sequence[int]
+                    ) -> tuple[int, list[FrameResult]]:  # fmt: skip
+        """The shape pass's start (`calibrate_shape`): the index into `sequence` of the frame
+        it starts from and that frame's result (in a list), the tracker's state as that start
+        left it; its event in `_start_event`."""
+        bar = self.config.max_xor_fraction
+        fresh = self._track_state()
+        tries: list[tuple[FrameResult, dict[str, Any]]] = []
+        for index in range(0, min(max(self.config.shape_frames, 1), len(sequence)),
+                           _SEARCH_AGAIN_FRAMES):  # fmt: skip
+            self._set_track_state(fresh)
+            result = self.track(index, sequence[index])
+            if result.pose is None:
+                if index == 0:
+                    raise TrackingLost(result.event.removeprefix("lost: "))
+                continue
+            tries.append((result, self._track_state()))
+            if result.xor_fraction <= bar:
+                break
+        result, state = min(tries, key=lambda t: t[0].xor_fraction)
+        self._set_track_state(state)
+        self._start_event = f"{result.event}; segment lengths from the first frames"
+        if result.frame:
+            over = [f"{frames[r.frame]} (XOR {r.xor_fraction:.1%})" for r, _ in tries
+                    if r.frame < result.frame]  # fmt: skip
+            self._start_event = (
+                f"{result.event} at frame {frames[result.frame]}; segment lengths from the "
+                f"frames from there: the start search at frame(s) {', '.join(over)} was over "
+                f"the absolute bar ({bar:.0%})")
+        return result.frame, [result]
+
+    def _tracked_to_start(self, sequence: Sequence[Sequence[np.ndarray]],
+                          frames: Sequence[int], first: int, x: np.ndarray
+                          ) -> np.ndarray | None:  # fmt: skip
+        """The shape pass's pose `x` of frame `first` (its start, past the first frame: see
+        `calibrate_shape`) tracked back to frame 0 of `sequence` with the pass's shape, each
+        frame under the absolute bar (backwards, a divergence ends it). Returns the pose of
+        frame 0, or None where the track back ended before it; the frames it reached are the
+        pass's poses of those frames (`_recover`), and `_start_event` says how it went."""
+        self.history, self._lost_since, self._backwards = [x], None, True
+        try:
+            for index in range(first - 1, -1, -1):
+                result = self.track(index, sequence[index])
+                if result.pose is None or result.status != "tracked":
+                    self._start_event += (f", not tracked back to frame {frames[0]} (frame "
+                                          f"{frames[index]}: {result.event})")
+                    return None
+                if not result.unexplained:
+                    self._shape_pass_poses[frames[index]] = result.pose.params
+        finally:
+            self._backwards = False
+        self._start_event += f", tracked back to frame {frames[0]}"
+        return result.pose.params
 
     def refine(self, masks: Sequence[np.ndarray], pose: Pose, *, passes: int = 2,
                shape: bool = False) -> Pose:  # fmt: skip
@@ -1565,21 +1631,35 @@ class SilhouetteTracker:
                                                evaluations=results[i].evaluations)
                         for i in range(switch, anchor)}  # fmt: skip
 
-    @contextmanager
-    def _state_kept(self) -> Iterator[None]:
-        """What tracking a frame changes of the tracker (the prediction's history, the
-        divergence watch, the last good pose, the lost frames, the mend's back-off), as it was
-        before: `track_back` tracks frames again without changing the track that follows."""
+    _TRACK_STATE = ("history", "watch", "_last_good", "_lost_since", "_gap_statuses",
+                    "_tracked_any", "_xor_floor", "_mend_failed_at", "_backwards")
+    """What tracking a frame changes of the tracker (the prediction's history, the divergence
+    watch, the last good pose, the lost frames, the mend's back-off); a start also sets the
+    model."""
+
+    def _track_state(self) -> dict[str, Any]:
+        """A copy of `_TRACK_STATE` and the model (`_set_track_state` puts it back)."""
         import copy
 
-        names = ("history", "watch", "_last_good", "_lost_since", "_gap_statuses",
-                 "_tracked_any", "_xor_floor", "_mend_failed_at", "_backwards")
-        saved = {name: copy.deepcopy(getattr(self, name)) for name in names}
+        return {"model": self.model,  # (replaced by a start or a shape refinement, not changed)
+                **{name: copy.deepcopy(getattr(self, name)) for name in self._TRACK_STATE}}
+
+    def _set_track_state(self, state: dict[str, Any]) -> None:
+        """The tracker's state as `_track_state` copied it."""
+        import copy
+
+        for name, value in state.items():
+            setattr(self, name, value if name == "model" else copy.deepcopy(value))
+
+    @contextmanager
+    def _state_kept(self) -> Iterator[None]:
+        """The tracker's state (`_track_state`) as it was before: `track_back` tracks frames
+        again without changing the track that follows."""
+        saved = self._track_state()
         try:
             yield
         finally:
-            for name, value in saved.items():
-                setattr(self, name, value)
+            self._set_track_state(saved)
 
     def unexplained_share(self, masks: Sequence[np.ndarray], pose: Pose) -> float:
         """The share of this frame's visual hull that `pose` leaves out
@@ -1733,6 +1813,10 @@ class SilhouetteTracker:
                 event = f"init from {found}"
             elif not self.history:
                 pose, event = self.initialise(masks, init)
+                if init is None and self._start_event and not self._starting:
+                    # The shape pass's pose did not reach this frame (`calibrate_shape`).
+                    event = f"{event}, with the shape of the shape pass: {self._start_event}"
+                    self._start_event = ""
                 x = pose.params
                 energy = self._energy(masks)  # the model exists (and is fixed) from here on
             else:

@@ -222,6 +222,12 @@ def test_the_shape_pass_warning_says_why_it_had_fewer_poses():
     short = _short_shape_pass(config, frames[:9], [0, 4, 8])
     assert short[0].startswith("the sequence has 9 frames for --shape-frames 24: the body's "
                                "shape comes from 3 pose(s) (frame(s) 10, 14, 18) instead of 6")
+    # A start over the bar at frames 10-16 moved the pass to frame 19 (`calibrate_shape`),
+    # and the 30 frames end 21 frames after it: 6 poses would have fitted from frame 10.
+    late = _short_shape_pass(config, list(range(10, 40)), [9, 13, 17, 21, 25])
+    assert late[0].startswith("the sequence has 21 frames from frame 19, where the shape pass "
+                              "started (the start search before it was over the bar), for "
+                              "--shape-frames 24: the body's shape comes from 5 pose(s)")
 
 
 def _head_out_of_cam00() -> list:

@@ -536,6 +536,29 @@ def test_a_start_gone_wrong_is_tracked_back_from_the_frames_after_it(tmp_path):
     assert "tracked back" in pose["frames"][0]["event"]
 
 
+@pytest.mark.slow  # three starts, a shape pass and a track of 30 frames at 640x480: ~100 s
+@pytest.mark.shared_data
+def test_a_shape_pass_moves_past_starts_over_the_bar_and_tracks_back_to_frame_0(tmp_path):
+    """The motion suite's cartwheel from clip frame 150: at frame 0 the subject is bent
+    sideways and the start search finds a 1.8 m body at 44% XOR, 236 mm off; a shape pass from
+    there made the subject 1.73-1.77 m for 1.56 (session 45). The search at frame 3 is over
+    the absolute bar too, the one at 6 under it: the pass runs from 6, and its pose there is
+    tracked back to frame 0 with the shape it found. Frame 0 is then "init", under 30 mm
+    (measured 5.0; before, "diverged" at 236), and so is every frame of the 30 (measured
+    at most 11)."""
+    ws = _suite_clip_from_150(tmp_path, "cartwheel")
+    result = run_cli("track", ws, "--last", "29")
+    assert result.returncode == 0, result.stderr
+    pose = json.loads((ws / "tracks" / "pose.json").read_text())
+    event = pose["frames"][0]["event"]
+    assert pose["frames"][0]["status"] == "init" and pose["diverged"] == [], event
+    assert ("at frame 6; segment lengths from the frames from there: the start search at "
+            "frame(s) 0 (XOR" in event and "tracked back to frame 0" in event), event
+    errors = _frame_errors_mm(ws)
+    assert errors[0] < 30 and max(errors.values()) < 30, errors
+    assert abs(pose["shape"]["height"] - 1.56) < 0.04, pose["shape"]["height"]
+
+
 @pytest.mark.slow  # a track of 39 frames at 640x480: about 90 s
 @pytest.mark.shared_data
 def test_the_cartwheels_divergence_is_tracked_back_from_its_recovery(tmp_path):
@@ -883,7 +906,7 @@ def test_the_shape_pass_refines_the_shape_on_the_poses_tracked_back(monkeypatch)
     refined on the poses of the frames tracked back (0 and 4 of frames 0-8, stride 4), and
     its start says how many were."""
     tracker = SilhouetteTracker(CAMERAS, dataclasses.replace(SUPERQUADRIC, shape_stride=4))
-    forward = [40, 30, 20, 15, 12, 11, 10, 11, 12]
+    forward = [34, 30, 20, 15, 12, 11, 10, 11, 12]  # (the first under the absolute bar)
     refined = []
 
     def track(frame, masks, init=None):
@@ -905,6 +928,86 @@ def test_the_shape_pass_refines_the_shape_on_the_poses_tracked_back(monkeypatch)
     first = tracker.calibrate_shape([[i] for i in range(9)])
     assert refined == [100, 104, 8] and first.params[0] == 100
     assert tracker._start_event.endswith("the first 6 tracked back")
+
+
+def _pass_over_the_bar(monkeypatch, start_xor, back_statuses=None):
+    """`calibrate_shape` over 30 frames (`shape_frames` 12, stride 2) with stand-ins: a start
+    (the tracker's history empty) at frame f has XOR start_xor[f] (of a silhouette of 100,
+    a pose whose parameters are all f), a tracked frame f 10% (parameters f), and a frame
+    tracked backwards status back_statuses.get(f, "tracked") (parameters 100 + f). Returns
+    the tracker, its pose, the frames it tracked ((frame, "start"/"track"/"back")), the
+    poses the shape was refined on (their first parameter) and the progress counted."""
+    config = dataclasses.replace(SUPERQUADRIC, shape_frames=12, shape_stride=2)
+    tracker, tracked, refined, progress = SilhouetteTracker(CAMERAS, config), [], [], []
+    back_statuses = back_statuses or {}
+
+    def track(frame, masks, init=None):
+        x = np.full(N_POSE_PARAMS, float(frame))
+        if tracker._backwards:
+            tracked.append((frame, "back"))
+            status = back_statuses.get(frame, "tracked")
+            return FrameResult(frame, Pose(x + 100.0), 10.0, 100.0, 0, 0.0,
+                               "diverged: stand-in" if status == "diverged" else "", status)
+        kind = "track" if tracker.history else "start"
+        tracked.append((frame, kind))
+        tracker.history = [*tracker.history[-1:], x]
+        if kind == "start":
+            return FrameResult(frame, Pose(x), start_xor[frame], 100.0, 0, 0.0,
+                               "init from stand-in", "init")  # fmt: skip
+        return FrameResult(frame, Pose(x), 10.0, 100.0, 0, 0.0, "", "tracked")
+
+    def refine_shape(sequence, poses):
+        refined.extend(int(p.params[0]) for p in poses)
+        return poses
+
+    monkeypatch.setattr(tracker, "track", track)
+    monkeypatch.setattr(tracker, "_refine_shape", refine_shape)
+    monkeypatch.setattr(tracker, "_energy", lambda masks: None)
+    monkeypatch.setattr(tracker, "_refine_all", lambda energy, x, init=False: x)
+    monkeypatch.setattr(tracker, "track_back", lambda results, masks_of: {})
+    first = tracker.calibrate_shape([[i] for i in range(30)], frames=range(100, 130),
+                                    progress=lambda: progress.append(1))
+    return tracker, first, tracked, refined, len(progress)
+
+
+def test_a_shape_pass_whose_start_is_over_the_bar_starts_where_one_is_under_it(monkeypatch):
+    """The start at frame 0 at 45% XOR and at 3 at 40%, over the absolute bar (35%): a
+    shape from those poses would be wrong (the frame-150 cartwheel's 1.84 m model for a
+    1.56 m subject). The search runs again every 3 frames; at frame 6 it is under the bar
+    (20%), and the pass runs from there: frames 7-16 tracked (12 frames from 6, the last
+    refined one 16), the shape refined on 6, 8, ..., 16, and the pose of frame 6 tracked
+    back to frame 0 with that shape, which is the pose returned. The frames tracked back
+    are the pass's poses of those frames (a recovery's candidates)."""
+    tracker, first, tracked, refined, progress = _pass_over_the_bar(
+        monkeypatch, {0: 45.0, 3: 40.0, 6: 20.0})
+    assert tracked == [(0, "start"), (3, "start"), (6, "start"),
+                       *[(f, "track") for f in range(7, 17)],
+                       *[(f, "back") for f in range(5, -1, -1)]]
+    assert refined == [6, 8, 10, 12, 14, 16] and tracker.shape_frames_used == refined
+    assert first.params[0] == 100.0 and progress == 12
+    assert sorted(tracker._shape_pass_poses) == list(range(100, 117))
+    assert tracker._shape_pass_poses[100][0] == 100.0  # frame 0: tracked back
+    assert tracker._shape_pass_poses[106][0] == 6.0
+    assert ("at frame 106" in tracker._start_event and "100 (XOR 45.0%), 103 (XOR 40.0%)"
+            in tracker._start_event and tracker._start_event.endswith("to frame 100"))
+    assert tracker.history == [] and tracker._last_good is None and not tracker._backwards
+
+
+def test_a_shape_pass_start_not_tracked_back_to_the_first_frame_leaves_it_a_search(
+        monkeypatch):
+    """As above, but the track back from frame 6 diverges at frame 3: no pose is returned
+    (`mocap track` searches the first frame's start with the pass's shape), and the start's
+    event says why; the frames it reached (5, 4) are the pass's poses. When no start is
+    under the bar, the lowest wins (frame 9 of 0-9: the first `shape_frames`)."""
+    tracker, first, tracked, _, _ = _pass_over_the_bar(
+        monkeypatch, {0: 45.0, 3: 40.0, 6: 20.0}, back_statuses={3: "diverged"})
+    assert first is None and tracked[-3:] == [(5, "back"), (4, "back"), (3, "back")]
+    assert "not tracked back to frame 100 (frame 103: diverged" in tracker._start_event
+    assert {105, 104} <= set(tracker._shape_pass_poses) and 103 not in tracker._shape_pass_poses
+    tracker, first, tracked, refined, _ = _pass_over_the_bar(
+        monkeypatch, {0: 45.0, 3: 40.0, 6: 50.0, 9: 38.0})
+    assert [t for t in tracked if t[1] == "start"] == [(f, "start") for f in (0, 3, 6, 9)]
+    assert refined[0] == 9 and first.params[0] == 100.0
 
 
 def test_cli_track_needs_a_video_workspace(tmp_path):
