@@ -618,6 +618,20 @@ def test_cli_track_from_a_given_pose_in_another_frame(tmp_path):
     assert np.linalg.norm(vertices.mean(axis=0) - joints.mean(axis=0)) < 0.15
 
 
+def _pass_stand_ins(monkeypatch, tracker, track, refined, masks=False):
+    """`calibrate_shape`'s stand-ins: `track` for the tracker's, a shape refinement that notes
+    in `refined` the first parameter of each pose it refines (its masks with `masks`) and
+    leaves them, no energy and no refinement."""
+    def refine_shape(sequence, poses):
+        refined.extend(sequence if masks else [int(p.params[0]) for p in poses])
+        return poses
+
+    monkeypatch.setattr(tracker, "track", track)
+    monkeypatch.setattr(tracker, "_refine_shape", refine_shape)
+    monkeypatch.setattr(tracker, "_energy", lambda masks: None)
+    monkeypatch.setattr(tracker, "_refine_all", lambda energy, x, init=False: x)
+
+
 def test_the_shape_pass_tracks_no_frame_after_its_last_refined_one(monkeypatch):
     """`calibrate_shape` over 10 frames with a stride of 4 refines the shape with frames 0, 4
     and 8: it tracks frames 0-8 and not 9, which tell the shape nothing, and its progress
@@ -631,14 +645,7 @@ def test_the_shape_pass_tracks_no_frame_after_its_last_refined_one(monkeypatch):
         return FrameResult(frame, Pose(np.full(N_POSE_PARAMS, float(frame))), 0.0, 1.0, 0, 0.0,
                            "init" if frame == 0 else "", "init" if frame == 0 else "tracked")
 
-    def refine_shape(sequence, poses):
-        refined.extend(sequence)
-        return poses
-
-    monkeypatch.setattr(tracker, "track", track)
-    monkeypatch.setattr(tracker, "_refine_shape", refine_shape)
-    monkeypatch.setattr(tracker, "_energy", lambda masks: None)
-    monkeypatch.setattr(tracker, "_refine_all", lambda energy, x, init=False: x)
+    _pass_stand_ins(monkeypatch, tracker, track, refined, masks=True)
     first = tracker.calibrate_shape([[i] for i in range(10)], progress=lambda: progress.append(1))
     assert tracked == list(range(9)) and len(progress) == 10
     assert refined == [[0], [4], [8]] and tracker.shape_frames_used == [0, 4, 8]
@@ -656,10 +663,7 @@ def _shape_pass(monkeypatch, tracker, statuses, frames):
                            "", "tracked" if status == "unexplained" else status,
                            unexplained=status == "unexplained")  # fmt: skip
 
-    monkeypatch.setattr(tracker, "track", track)
-    monkeypatch.setattr(tracker, "_refine_shape", lambda sequence, poses: poses)
-    monkeypatch.setattr(tracker, "_energy", lambda masks: None)
-    monkeypatch.setattr(tracker, "_refine_all", lambda energy, x, init=False: x)
+    _pass_stand_ins(monkeypatch, tracker, track, [])
     monkeypatch.setattr(tracker, "track_back", lambda results, masks_of: {})
     tracker.calibrate_shape([[i] for i in range(len(statuses))], frames=frames)
 
@@ -917,14 +921,7 @@ def test_the_shape_pass_refines_the_shape_on_the_poses_tracked_back(monkeypatch)
                            100.0, 0, 0.0, "init" if frame == 0 else "",
                            "init" if frame == 0 else "tracked")  # fmt: skip
 
-    def refine_shape(sequence, poses):
-        refined.extend(int(p.params[0]) for p in poses)
-        return poses
-
-    monkeypatch.setattr(tracker, "track", track)
-    monkeypatch.setattr(tracker, "_refine_shape", refine_shape)
-    monkeypatch.setattr(tracker, "_energy", lambda masks: None)
-    monkeypatch.setattr(tracker, "_refine_all", lambda energy, x, init=False: x)
+    _pass_stand_ins(monkeypatch, tracker, track, refined)
     first = tracker.calibrate_shape([[i] for i in range(9)])
     assert refined == [100, 104, 8] and first.params[0] == 100
     assert tracker._start_event.endswith("the first 6 tracked back")
@@ -956,14 +953,7 @@ def _pass_over_the_bar(monkeypatch, start_xor, back_statuses=None):
                                "init from stand-in", "init")  # fmt: skip
         return FrameResult(frame, Pose(x), 10.0, 100.0, 0, 0.0, "", "tracked")
 
-    def refine_shape(sequence, poses):
-        refined.extend(int(p.params[0]) for p in poses)
-        return poses
-
-    monkeypatch.setattr(tracker, "track", track)
-    monkeypatch.setattr(tracker, "_refine_shape", refine_shape)
-    monkeypatch.setattr(tracker, "_energy", lambda masks: None)
-    monkeypatch.setattr(tracker, "_refine_all", lambda energy, x, init=False: x)
+    _pass_stand_ins(monkeypatch, tracker, track, refined)
     monkeypatch.setattr(tracker, "track_back", lambda results, masks_of: {})
     first = tracker.calibrate_shape([[i] for i in range(30)], frames=range(100, 130),
                                     progress=lambda: progress.append(1))
