@@ -265,9 +265,9 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
     with (Timer() as timer, _Recorder(ws, upright, frame_rate, logged) as recorder,
           single_blas_thread()):
         if init_model is None and config.shape_frames > 1:
-            # (A start over the bar moves the pass on, up to `shape_frames` - 1 frames: those
-            # are read too, `calibrate_shape`.)
-            shape_frames = frames[first:first + 2 * config.shape_frames - 1]
+            # (A start over the bar moves the pass on, up to `shape_frames` - 1 frames, and a
+            # second opinion at its end once more: those are read too, `calibrate_shape`.)
+            shape_frames = frames[first:first + 3 * config.shape_frames]
             bar = progress_bar(min(len(shape_frames), config.shape_frames), "shape", "frame",
                                enabled=progress)
             try:

@@ -423,7 +423,9 @@ class TrackConfig:
                   "frame's XOR is over this factor times that (a start gone wrong that the "
                   "track found its way out of), in the shape pass too; so is a divergence "
                   "or loss, from the frame that recovers from it; the frames tracked back "
-                  "replace the others where their XOR is clearly lower (0 = off)"},
+                  "replace the others where their XOR is clearly lower; and a shape pass runs "
+                  "again from its last frame when a start searched there is under 1/factor "
+                  "of its XOR there (0 = off)"},
     )  # fmt: skip
     init_headings: int = field(
         default=8,
@@ -1107,8 +1109,12 @@ class SilhouetteTracker:
         so is every pose after it. The start search then runs again, each time with a shape
         of its own, every `_SEARCH_AGAIN_FRAMES` frames of the first `shape_frames` until one
         is under the bar (else the lowest wins), and the pass runs from there (`sequence` may
-        hold the frames it needs past the first `shape_frames`). The pose so found is then
-        tracked back to the first frame with the pass's shape (`_tracked_to_start`).
+        hold the frames it needs past the first `shape_frames`: `mocap track` gives it 3
+        times those). A start under the bar can be
+        wrong too, and the pass track on from it wrong: a start searched afresh at the pass's
+        last frame, clearly lower than the pass there, starts the pass again from there
+        (`_second_opinion`). The pose so found is then tracked back to the first frame with
+        the pass's shape (`_tracked_to_start`).
 
         Returns the first frame's pose with that shape (None: the track back did not reach
         it under the bar, and the first frame's start is searched with the shape); the
@@ -1127,23 +1133,15 @@ class SilhouetteTracker:
         """`calibrate_shape` (the start's parameters held)."""
         cfg = self.config
         stride = max(cfg.shape_stride, 1)
-        first, results = self._pass_start(sequence, frames)
+        fresh = self._track_state()
+        first, results = self._pass_start(sequence, frames, fresh)
         if progress is not None:
             progress()
-        # The pass's frames from its start; those after the last one refined tell the shape
-        # nothing: not tracked (3 of the default 24, about 0.8 s of a start).
-        length = min(max(cfg.shape_frames, 1), len(sequence) - first)
-        needed = (length - 1) // stride * stride + 1
-        for index in range(first + 1, first + needed):
-            result = self.track(index, sequence[index])
-            if progress is not None:
-                progress()
-            if result.pose is None:
-                break
-            results.append(result)
-        else:  # the frames not needed are done too
-            for _ in range(length - needed) if progress is not None else ():
-                progress()
+        results = self._pass_frames(sequence, results, progress)
+        moved = self._second_opinion(sequence, frames, results, fresh)
+        if moved is not None:  # (its frames are not counted again)
+            first, results = moved
+            results = self._pass_frames(sequence, results, None)
         # A start gone wrong is found from the frames after it: the shape comes from those.
         back = self.track_back(results, lambda index: sequence[index])
         if 0 in back:
@@ -1166,13 +1164,12 @@ class SilhouetteTracker:
         self.watch.restart()
         return None if x is None else Pose(in_limits(x))
 
-    def _pass_start(self, sequence: Sequence[Sequence[np.ndarray]], frames: Sequence[int]
-                    ) -> tuple[int, list[FrameResult]]:  # fmt: skip
+    def _pass_start(self, sequence: Sequence[Sequence[np.ndarray]], frames: Sequence[int],
+                    fresh: dict[str, Any]) -> tuple[int, list[FrameResult]]:  # fmt: skip
         """The shape pass's start (`calibrate_shape`): the index into `sequence` of the frame
         it starts from and that frame's result (in a list), the tracker's state as that start
-        left it; its event in `_start_event`."""
+        left it (each search from the state `fresh`); its event in `_start_event`."""
         bar = self.config.max_xor_fraction
-        fresh = self._track_state()
         tries: list[tuple[FrameResult, dict[str, Any]]] = []
         for index in range(0, min(max(self.config.shape_frames, 1), len(sequence)),
                            _SEARCH_AGAIN_FRAMES):  # fmt: skip
@@ -1196,6 +1193,60 @@ class SilhouetteTracker:
                 f"frames from there: the start search at frame(s) {', '.join(over)} was over "
                 f"the absolute bar ({bar:.0%})")
         return result.frame, [result]
+
+    def _pass_frames(self, sequence: Sequence[Sequence[np.ndarray]],
+                     results: list[FrameResult], progress: Callable[[], object] | None
+                     ) -> list[FrameResult]:  # fmt: skip
+        """The shape pass's frames after its start (`results`, one), tracked: `shape_frames`
+        from the start, those after the last one refined not (they tell the shape nothing: 3
+        of the default 24, about 0.8 s of a start), until one is lost. Returns the results."""
+        cfg = self.config
+        stride = max(cfg.shape_stride, 1)
+        first = results[0].frame
+        length = min(max(cfg.shape_frames, 1), len(sequence) - first)
+        needed = (length - 1) // stride * stride + 1
+        for index in range(first + 1, first + needed):
+            result = self.track(index, sequence[index])
+            if progress is not None:
+                progress()
+            if result.pose is None:
+                break
+            results.append(result)
+        else:  # the frames not needed are done too
+            for _ in range(length - needed) if progress is not None else ():
+                progress()
+        return results
+
+    def _second_opinion(self, sequence: Sequence[Sequence[np.ndarray]], frames: Sequence[int],
+                        results: list[FrameResult], fresh: dict[str, Any]
+                        ) -> tuple[int, list[FrameResult]] | None:  # fmt: skip
+        """A start searched afresh (a shape of its own) at the shape pass's last frame, against
+        what the pass tracked there from its start (`results`): when clearly lower (its XOR
+        times `back_xor_factor` under the pass's), the pass started wrong and tracked on wrong
+        (the suite's bend_pickup from clip frame 150: a start at 27% XOR, 103 mm off, 1.40 m
+        for a 1.56 m subject, tracked at 26-35% XOR, 100-130 mm, and a shape of 1.45 m; a
+        start at its frames 6-23 reaches 13-19%, 30-34 mm, 1.50-1.55 m; session 46), and it
+        runs again from there: returns that frame's index and result (in a list), the state as
+        that start left it. None (and the state as it was): the pass stands, or the test is
+        off (`back_xor_factor` 0), or the pass is one frame, or `sequence` has fewer frames
+        from there than the pass had (a shape from fewer poses: not searched)."""
+        factor = self.config.back_xor_factor
+        last = results[-1]
+        length = min(max(self.config.shape_frames, 1), len(sequence) - results[0].frame)
+        if factor <= 0 or len(results) < 2 or len(sequence) - last.frame < length:
+            return None
+        kept = self._track_state()
+        self._set_track_state(fresh)
+        result = self.track(last.frame, sequence[last.frame])
+        if result.pose is None or factor * result.xor_fraction >= last.xor_fraction:
+            self._set_track_state(kept)
+            return None
+        start = frames[results[0].frame]
+        self._start_event = (
+            f"{result.event} at frame {frames[last.frame]} (XOR {result.xor_fraction:.1%}); "
+            f"segment lengths from the frames from there: the shape pass from frame {start} "
+            f"had reached XOR {last.xor_fraction:.1%} there (its start: {self._start_event})")
+        return last.frame, [result]
 
     def _tracked_to_start(self, sequence: Sequence[Sequence[np.ndarray]],
                           frames: Sequence[int], first: int, x: np.ndarray

@@ -927,14 +927,16 @@ def test_the_shape_pass_refines_the_shape_on_the_poses_tracked_back(monkeypatch)
     assert tracker._start_event.endswith("the first 6 tracked back")
 
 
-def _pass_over_the_bar(monkeypatch, start_xor, back_statuses=None):
+def _pass_over_the_bar(monkeypatch, start_xor, back_statuses=None, tracked_xor=10.0,
+                       **settings):
     """`calibrate_shape` over 30 frames (`shape_frames` 12, stride 2) with stand-ins: a start
-    (the tracker's history empty) at frame f has XOR start_xor[f] (of a silhouette of 100,
-    a pose whose parameters are all f), a tracked frame f 10% (parameters f), and a frame
+    (the tracker's history empty) at frame f has XOR start_xor.get(f, 50%) (of a silhouette of
+    100, a pose whose parameters are all f), a tracked frame f `tracked_xor` (parameters f),
+    and a frame
     tracked backwards status back_statuses.get(f, "tracked") (parameters 100 + f). Returns
     the tracker, its pose, the frames it tracked ((frame, "start"/"track"/"back")), the
     poses the shape was refined on (their first parameter) and the progress counted."""
-    config = dataclasses.replace(SUPERQUADRIC, shape_frames=12, shape_stride=2)
+    config = dataclasses.replace(SUPERQUADRIC, shape_frames=12, shape_stride=2, **settings)
     tracker, tracked, refined, progress = SilhouetteTracker(CAMERAS, config), [], [], []
     back_statuses = back_statuses or {}
 
@@ -949,9 +951,9 @@ def _pass_over_the_bar(monkeypatch, start_xor, back_statuses=None):
         tracked.append((frame, kind))
         tracker.history = [*tracker.history[-1:], x]
         if kind == "start":
-            return FrameResult(frame, Pose(x), start_xor[frame], 100.0, 0, 0.0,
+            return FrameResult(frame, Pose(x), start_xor.get(frame, 50.0), 100.0, 0, 0.0,
                                "init from stand-in", "init")  # fmt: skip
-        return FrameResult(frame, Pose(x), 10.0, 100.0, 0, 0.0, "", "tracked")
+        return FrameResult(frame, Pose(x), tracked_xor, 100.0, 0, 0.0, "", "tracked")
 
     _pass_stand_ins(monkeypatch, tracker, track, refined)
     monkeypatch.setattr(tracker, "track_back", lambda results, masks_of: {})
@@ -972,6 +974,7 @@ def test_a_shape_pass_whose_start_is_over_the_bar_starts_where_one_is_under_it(m
         monkeypatch, {0: 45.0, 3: 40.0, 6: 20.0})
     assert tracked == [(0, "start"), (3, "start"), (6, "start"),
                        *[(f, "track") for f in range(7, 17)],
+                       (16, "start"),  # the second opinion (`_second_opinion`): 50%, stands
                        *[(f, "back") for f in range(5, -1, -1)]]
     assert refined == [6, 8, 10, 12, 14, 16] and tracker.shape_frames_used == refined
     assert first.params[0] == 100.0 and progress == 12
@@ -996,8 +999,34 @@ def test_a_shape_pass_start_not_tracked_back_to_the_first_frame_leaves_it_a_sear
     assert {105, 104} <= set(tracker._shape_pass_poses) and 103 not in tracker._shape_pass_poses
     tracker, first, tracked, refined, _ = _pass_over_the_bar(
         monkeypatch, {0: 45.0, 3: 40.0, 6: 50.0, 9: 38.0})
+    # (No second opinion at 19: 11 frames from there, fewer than the pass's 12.)
     assert [t for t in tracked if t[1] == "start"] == [(f, "start") for f in (0, 3, 6, 9)]
     assert refined[0] == 9 and first.params[0] == 100.0
+
+
+def test_a_shape_pass_tracked_far_above_a_start_searched_at_its_end_runs_again_from_there(
+        monkeypatch):
+    """The pass's start at frame 0 under the bar (27%), its frames tracked at 30% XOR; a start
+    searched afresh at its last frame (10) reaches 12%, clearly lower (1.2 times 12 is under
+    30): the pass started wrong (the suite's bend_pickup from clip frame 150, session 46), and
+    runs again from frame 10, whose pose is tracked back to frame 0 with the shape from frames
+    10-20. With --back-xor-factor 0, or at 26% there (1.2 times that is over 30), the pass
+    stands."""
+    tracker, first, tracked, refined, progress = _pass_over_the_bar(
+        monkeypatch, {0: 27.0, 10: 12.0}, tracked_xor=30.0)
+    assert tracked == [(0, "start"), *[(f, "track") for f in range(1, 11)], (10, "start"),
+                       *[(f, "track") for f in range(11, 21)],
+                       *[(f, "back") for f in range(9, -1, -1)]]
+    assert refined == [10, 12, 14, 16, 18, 20] and first.params[0] == 100.0 and progress == 12
+    assert ("at frame 110 (XOR 12.0%); segment lengths from the frames from there: the shape "
+            "pass from frame 100 had reached XOR 30.0% there (its start: init from stand-in"
+            in tracker._start_event), tracker._start_event
+    _, _, tracked, refined, _ = _pass_over_the_bar(monkeypatch, {0: 27.0, 10: 26.0},
+                                                   tracked_xor=30.0)
+    assert tracked[-1] == (10, "start") and refined == [0, 2, 4, 6, 8, 10]
+    _, _, tracked, refined, _ = _pass_over_the_bar(monkeypatch, {0: 27.0, 10: 12.0},
+                                                   tracked_xor=30.0, back_xor_factor=0.0)
+    assert tracked[-1] == (10, "track") and refined == [0, 2, 4, 6, 8, 10]
 
 
 def test_cli_track_needs_a_video_workspace(tmp_path):
