@@ -641,7 +641,15 @@ there (`SilhouetteTracker._second_opinion`). It moved 4 of the 33 passes: bend_p
 (34.2% -> 12.3% at frame 20) 44.3 -> **6.8 mm**, the cartwheel@150 (16.6% -> 12.1% at 26)
 7.2 -> 6.9, seed-0 jump (16.7% -> 11.1%) 11.6 -> 8.5 and arms_overhead (14.5% -> 11.8%) 7.7
 -> 6.3; the other 29 identical. Means: seed 0 8.9 -> **8.6 mm**, frame 150 18.6 -> 11.0 ->
-**7.8**, seed 1 unchanged; every accuracy target PASS on the three sets. SPEED
+**7.8**, seed 1 unchanged; every accuracy target PASS on the three sets. Measured on the
+clip's other seeds too: bend_pickup@150 seed 1 moved (25.9% -> 13.9% at frame 20), 8.6 -> 9.3
+mm (its frames 0-4 23-42 mm after the track back); seed 2 stood, 8.0; the cartwheel@150's
+seeds 1 and 2 stood (10.9, 8.7). Pose2Sim demo: stood, 100/100 frames, median IoU 0.832. The
+second opinion is one more start search per track: the seed-0 walk alone, in turn against
+session 45's code (A D A D), 1.92 and 1.92 frames/s against 1.49 and 1.53, its start and shape
+pass 17 -> 25-26 s. Nothing beside: seed 0 1.12-1.73 frames/s (session 45: 1.31-2.38; bend_pickup
+1.12, the slowest), frame 150 1.35-1.83 and the cartwheel **0.99** (0.70 before: its divergence
+at 55 is gone; **not met**, by 0.01).
 
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
