@@ -1188,10 +1188,9 @@ class SilhouetteTracker:
         if result.frame:
             over = [f"{frames[r.frame]} (XOR {r.xor_fraction:.1%})" for r, _ in tries
                     if r.frame < result.frame]  # fmt: skip
-            self._start_event = (
-                f"{result.event} at frame {frames[result.frame]}; segment lengths from the "
-                f"frames from there: the start search at frame(s) {', '.join(over)} was over "
-                f"the absolute bar ({bar:.0%})")
+            self._start_event = _pass_moved(
+                result.event, f"{frames[result.frame]}", f"the start search at frame(s) "
+                f"{', '.join(over)} was over the absolute bar ({bar:.0%})")
         return result.frame, [result]
 
     def _pass_frames(self, sequence: Sequence[Sequence[np.ndarray]],
@@ -1242,10 +1241,10 @@ class SilhouetteTracker:
             self._set_track_state(kept)
             return None
         start = frames[results[0].frame]
-        self._start_event = (
-            f"{result.event} at frame {frames[last.frame]} (XOR {result.xor_fraction:.1%}); "
-            f"segment lengths from the frames from there: the shape pass from frame {start} "
-            f"had reached XOR {last.xor_fraction:.1%} there (its start: {self._start_event})")
+        self._start_event = _pass_moved(
+            result.event, f"{frames[last.frame]} (XOR {result.xor_fraction:.1%})",
+            f"the shape pass from frame {start} had reached XOR {last.xor_fraction:.1%} there "
+            f"(its start: {self._start_event})")
         return last.frame, [result]
 
     def _tracked_to_start(self, sequence: Sequence[Sequence[np.ndarray]],
@@ -2068,6 +2067,12 @@ class SilhouetteTracker:
         # A recovered pose has no velocity; the tracked one keeps its own.
         self.history = history if found is None else []
         return best_x, best_e, found
+
+
+def _pass_moved(event: str, frame: str, why: str) -> str:
+    """The start event of a shape pass that runs from a later frame than the first (`frame`,
+    with what it adds), and `why` (`calibrate_shape`)."""
+    return f"{event} at frame {frame}; segment lengths from the frames from there: {why}"
 
 
 def _events(*parts: str) -> str:
