@@ -1131,17 +1131,16 @@ class SilhouetteTracker:
                          progress: Callable[[], object] | None, frames: Sequence[int],
                          ) -> Pose | None:  # fmt: skip
         """`calibrate_shape` (the start's parameters held)."""
-        cfg = self.config
-        stride = max(cfg.shape_stride, 1)
+        stride = max(self.config.shape_stride, 1)
         fresh = self._track_state()
-        first, results = self._pass_start(sequence, frames, fresh)
+        results = [self._pass_start(sequence, frames, fresh)]
         if progress is not None:
             progress()
         results = self._pass_frames(sequence, results, progress)
         moved = self._second_opinion(sequence, frames, results, fresh)
         if moved is not None:  # (its frames are not counted again)
-            first, results = moved
-            results = self._pass_frames(sequence, results, None)
+            results = self._pass_frames(sequence, [moved], None)
+        first = results[0].frame  # (the pass's start, an index into `sequence`)
         # A start gone wrong is found from the frames after it: the shape comes from those.
         back = self.track_back(results, lambda index: sequence[index])
         if 0 in back:
@@ -1165,14 +1164,13 @@ class SilhouetteTracker:
         return None if x is None else Pose(in_limits(x))
 
     def _pass_start(self, sequence: Sequence[Sequence[np.ndarray]], frames: Sequence[int],
-                    fresh: dict[str, Any]) -> tuple[int, list[FrameResult]]:  # fmt: skip
-        """The shape pass's start (`calibrate_shape`): the index into `sequence` of the frame
-        it starts from and that frame's result (in a list), the tracker's state as that start
-        left it (each search from the state `fresh`); its event in `_start_event`."""
+                    fresh: dict[str, Any]) -> FrameResult:  # fmt: skip
+        """The shape pass's start (`calibrate_shape`): the result of the frame it starts from
+        (its `frame` an index into `sequence`), the tracker's state as that start left it
+        (each search from the state `fresh`); its event in `_start_event`."""
         bar = self.config.max_xor_fraction
         tries: list[tuple[FrameResult, dict[str, Any]]] = []
-        for index in range(0, min(max(self.config.shape_frames, 1), len(sequence)),
-                           _SEARCH_AGAIN_FRAMES):  # fmt: skip
+        for index in range(0, self._pass_length(sequence, 0), _SEARCH_AGAIN_FRAMES):
             self._set_track_state(fresh)
             result = self.track(index, sequence[index])
             if result.pose is None:
@@ -1191,7 +1189,12 @@ class SilhouetteTracker:
             self._start_event = _pass_moved(
                 result.event, f"{frames[result.frame]}", f"the start search at frame(s) "
                 f"{', '.join(over)} was over the absolute bar ({bar:.0%})")
-        return result.frame, [result]
+        return result
+
+    def _pass_length(self, sequence: Sequence[Sequence[np.ndarray]], first: int) -> int:
+        """The frames of a shape pass from index `first` of `sequence`: `shape_frames`, or
+        those `sequence` has from there."""
+        return min(max(self.config.shape_frames, 1), len(sequence) - first)
 
     def _pass_frames(self, sequence: Sequence[Sequence[np.ndarray]],
                      results: list[FrameResult], progress: Callable[[], object] | None
@@ -1199,10 +1202,9 @@ class SilhouetteTracker:
         """The shape pass's frames after its start (`results`, one), tracked: `shape_frames`
         from the start, those after the last one refined not (they tell the shape nothing: 3
         of the default 24, about 0.8 s of a start), until one is lost. Returns the results."""
-        cfg = self.config
-        stride = max(cfg.shape_stride, 1)
+        stride = max(self.config.shape_stride, 1)
         first = results[0].frame
-        length = min(max(cfg.shape_frames, 1), len(sequence) - first)
+        length = self._pass_length(sequence, first)
         needed = (length - 1) // stride * stride + 1
         for index in range(first + 1, first + needed):
             result = self.track(index, sequence[index])
@@ -1218,20 +1220,20 @@ class SilhouetteTracker:
 
     def _second_opinion(self, sequence: Sequence[Sequence[np.ndarray]], frames: Sequence[int],
                         results: list[FrameResult], fresh: dict[str, Any]
-                        ) -> tuple[int, list[FrameResult]] | None:  # fmt: skip
+                        ) -> FrameResult | None:  # fmt: skip
         """A start searched afresh (a shape of its own) at the shape pass's last frame, against
         what the pass tracked there from its start (`results`): when clearly lower (its XOR
         times `back_xor_factor` under the pass's), the pass started wrong and tracked on wrong
         (the suite's bend_pickup from clip frame 150: a start at 27% XOR, 103 mm off, 1.40 m
         for a 1.56 m subject, tracked at 26-35% XOR, 100-130 mm, and a shape of 1.45 m; a
         start at its frames 6-23 reaches 13-19%, 30-34 mm, 1.50-1.55 m; session 46), and it
-        runs again from there: returns that frame's index and result (in a list), the state as
-        that start left it. None (and the state as it was): the pass stands, or the test is
-        off (`back_xor_factor` 0), or the pass is one frame, or `sequence` has fewer frames
-        from there than the pass had (a shape from fewer poses: not searched)."""
+        runs again from there: returns that start's result, the state as that start left it.
+        None (and the state as it was): the pass stands, or the test is off (`back_xor_factor`
+        0), or the pass is one frame, or `sequence` has fewer frames from there than the pass
+        had (a shape from fewer poses: not searched)."""
         factor = self.config.back_xor_factor
         last = results[-1]
-        length = min(max(self.config.shape_frames, 1), len(sequence) - results[0].frame)
+        length = self._pass_length(sequence, results[0].frame)
         if factor <= 0 or len(results) < 2 or len(sequence) - last.frame < length:
             return None
         kept = self._track_state()
@@ -1245,7 +1247,7 @@ class SilhouetteTracker:
             result.event, f"{frames[last.frame]} (XOR {result.xor_fraction:.1%})",
             f"the shape pass from frame {start} had reached XOR {last.xor_fraction:.1%} there "
             f"(its start: {self._start_event})")
-        return last.frame, [result]
+        return result
 
     def _tracked_to_start(self, sequence: Sequence[Sequence[np.ndarray]],
                           frames: Sequence[int], first: int, x: np.ndarray
