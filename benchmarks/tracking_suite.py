@@ -711,6 +711,7 @@ unrecovered), bend_pickup's frame 22, 1 frame/s.
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
 import tempfile
 from pathlib import Path
@@ -740,6 +741,8 @@ RECOVERY_FRAMES = 5
 OFF_MM = 100.0
 """A frame tracked with an MPJPE above this is off, whatever its status."""
 TARGET_MEAN_MM, TARGET_CLIP_MM, TARGET_FPS = 30.0, 50.0, 1.0
+SUITE_FPS = 30.0
+"""The suite's frame rate (`mocap synth`'s default); ``--fps`` adds others."""
 
 
 def unrecovered(status: dict[int, str], within: int = RECOVERY_FRAMES) -> list[int]:
@@ -768,10 +771,12 @@ def unflagged_off(case: Case) -> list[int]:
             case.unexplained and case.status.get(f) in ("tracked", "init")]  # fmt: skip
 
 
-def seeded(clip: str, seed: int) -> str:
-    """A clip's name in the suite with its noise drawn from ``seed``: ``clip`` for seed 0 (the
-    suite's usual data), else ``clip@seed``."""
-    return clip if seed == 0 else f"{clip}@{seed}"
+def seeded(clip: str, seed: int, fps: float = SUITE_FPS) -> str:
+    """A clip's name in the suite with its noise drawn from ``seed`` and synthesised at ``fps``:
+    ``clip`` for seed 0 at the suite's 30 fps (its usual data), else ``clip@seed`` and
+    ``clip/60fps``."""
+    name = clip if seed == 0 else f"{clip}@{seed}"
+    return name if fps == SUITE_FPS else f"{name}/{fps:g}fps"
 
 
 def run_clip(
@@ -785,14 +790,17 @@ def run_clip(
     repeats: int = 1,
     seed: int = 0,
     warm_up: bool = False,
+    fps: float = SUITE_FPS,
 ) -> dict[str, Case]:
     """Synthesise ``frames`` frames of ``clip`` (of ``clip_dir``; its silhouette noise drawn
-    with ``seed``) into ``root/clip`` (``root/clip@seed`` for a seed other than 0) and track
-    them with each of ``trackers``, ``repeats`` times each (`best_of`); their figures by
-    tracker. warm_up: first track the first five frames, untimed (`warm`)."""
-    name = seeded(clip, seed)
-    ws = root / name
-    flags = ["--frames", str(frames), "--size", size, "--overwrite", "--seed", str(seed)]
+    with ``seed``; at ``fps``, `mocap synth`'s step closest to it) into ``root/NAME``
+    (`seeded`'s name, its slash a dash) and track them with each of ``trackers``, ``repeats``
+    times each (`best_of`); their figures by tracker. warm_up: first track the first five
+    frames, untimed (`warm`)."""
+    name = seeded(clip, seed, fps)
+    ws = root / name.replace("/", "-")
+    flags = ["--frames", str(frames), "--size", size, "--overwrite", "--seed", str(seed),
+             "--fps", f"{fps:g}"]
     synth_subject(
         ws,
         clip_dir / CLIPS[clip],
@@ -837,7 +845,8 @@ def main() -> None:
     parser.add_argument(
         "--clips", nargs="+", default=list(CLIPS), choices=CLIPS, help="clips to run (default: all)"
     )
-    parser.add_argument("--frames", type=int, default=60, help="frames per clip (at 30 fps)")
+    parser.add_argument("--frames", type=int, default=60, help="frames per clip (at 30 fps: "
+                        "at another --fps, as many seconds of motion)")
     parser.add_argument(
         "--start",
         nargs="+",
@@ -864,6 +873,15 @@ def main() -> None:
         "own, CLIP@SEED (default: 0 alone, named CLIP); the tracks are chaotic, and another "
         "noise is data nothing was tuned on",
     )
+    parser.add_argument(
+        "--fps",
+        nargs="+",
+        type=float,
+        default=[SUITE_FPS],
+        help="frame rates to synthesise each clip at (mocap synth --fps: the step of the 120 Hz "
+        "clip closest to it, so 25 gives 24): each is a clip of its own, CLIP/FPSfps (default: "
+        "30 alone); real rigs run at 25-60 fps, and the tracker was tuned at 30",
+    )
     args = parser.parse_args()
     if args.repeats < 1:
         parser.error(f"--repeats must be at least 1, got {args.repeats}")
@@ -873,15 +891,18 @@ def main() -> None:
     cases: dict[tuple[str, str], Case] = {}
     with tempfile.TemporaryDirectory() as tmp:
         for clip in args.clips:
-            for seed in args.seeds:
-                first = clip == args.clips[0] and seed == args.seeds[0]
-                for name, case in run_clip(args.keep or Path(tmp), clip, args.frames,
+            for seed, fps in itertools.product(args.seeds, args.fps):
+                first = clip == args.clips[0] and (seed, fps) == (args.seeds[0], args.fps[0])
+                frames = round(args.frames * fps / SUITE_FPS)
+                for name, case in run_clip(args.keep or Path(tmp), clip, frames,
                                            starts[clip], args.trackers, args.size,
                                            repeats=args.repeats, seed=seed,
-                                           warm_up=first).items():
-                    cases[seeded(clip, seed), name] = case
+                                           warm_up=first, fps=fps).items():
+                    cases[seeded(clip, seed, fps), name] = case
     fastest = f"; frames/s the fastest of {args.repeats} runs" if args.repeats > 1 else ""
-    print(f"\n{args.frames} frames per clip, {args.size}{fastest}\n"
+    rates = ", ".join(f"{round(args.frames * fps / SUITE_FPS)} at {fps:g} fps"
+                      for fps in args.fps)
+    print(f"\n{rates} per clip, {args.size}{fastest}\n"
           f"{'clip / tracker':<30}{'MPJPE':>8}"
           f"{'offsets out':>13}  {'worst joint':<22}{'lost':>5}{'div':>5}{'rec':>5}"
           f"{'unrec':>6}{'flag':>5}{'off':>5}{'unfl':>5}{'frames/s':>10}{'start s':>9}"
@@ -924,11 +945,12 @@ def main() -> None:
                 f"{w.fps:.2f} frames/s"
             )
         if len(args.seeds) > 1:
-            for clip in args.clips:
-                seeds = [mine[seeded(clip, seed)] for seed in args.seeds]
+            for clip, rate in itertools.product(args.clips, args.fps):
+                seeds = [mine[seeded(clip, seed, rate)] for seed in args.seeds]
                 mm, fps = [c.mpjpe_mm for c in seeds], [c.fps for c in seeds]
-                print(f"  {clip} over {len(seeds)} seeds: MPJPE {min(mm):.1f}-{max(mm):.1f} mm "
-                      f"(mean {np.mean(mm):.1f}), {min(fps):.2f}-{max(fps):.2f} frames/s")
+                print(f"  {seeded(clip, 0, rate)} over {len(seeds)} seeds: MPJPE "
+                      f"{min(mm):.1f}-{max(mm):.1f} mm (mean {np.mean(mm):.1f}), "
+                      f"{min(fps):.2f}-{max(fps):.2f} frames/s")
 
 
 if __name__ == "__main__":

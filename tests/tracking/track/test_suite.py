@@ -58,3 +58,26 @@ def test_suite_subset_tracks_three_clips(tmp_path: Path, monkeypatch: pytest.Mon
         assert case.shape_pass_s + FRAMES / case.tracking_fps < seconds, clip
         assert case.shape_pass_s + FRAMES / case.tracking_fps > 0.5 * seconds, clip
     assert np.mean(errors) <= TARGET_MEAN_MM, errors
+
+
+def test_the_suite_synthesises_a_clip_at_each_frame_rate_as_a_clip_of_its_own(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:  # fmt: skip
+    """``--fps``: `run_clip` asks `mocap synth` for the rate, in a workspace and under a name of
+    its own (``walk/60fps``, beside ``walk@1/60fps``), the 30 fps clip keeping its usual name."""
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    import tracking_suite
+
+    synthesised: dict[str, list[str]] = {}
+    monkeypatch.setattr(tracking_suite, "synth_subject",
+                        lambda ws, clip, flags: synthesised.update({ws.name: flags}))
+    monkeypatch.setattr(tracking_suite, "best_of", lambda ws, label, tracker, repeats: label)
+    for seed, fps in ((0, 30.0), (0, 60.0), (1, 25.0)):
+        labels = tracking_suite.run_clip(tmp_path, "walk", 12, None, ["current"], seed=seed,
+                                         fps=fps)  # fmt: skip
+        name = tracking_suite.seeded("walk", seed, fps)
+        assert labels == {"current": f"{name} / current"}
+    assert sorted(synthesised) == ["walk", "walk-60fps", "walk@1-25fps"]
+    assert tracking_suite.seeded("walk", 1, 25.0) == "walk@1/25fps"
+    for ws, fps in (("walk", "30"), ("walk-60fps", "60"), ("walk@1-25fps", "25")):
+        flags = synthesised[ws]
+        assert flags[flags.index("--fps") + 1] == fps, flags
