@@ -41,7 +41,8 @@ ties went the wrong way), and then the winner's own left/right swaps, refined al
 with it (`_winner_swapped`). When the shape is unknown, the shape parameters (the segment
 lengths, or the skinned body's macro shape and clothing: `TrackedModel.shape_parameters`)
 then come from the outlines, for the winner and each of its swaps, and the lowest XOR after
-that wins (`_shaped_winner`); `calibrate_shape` refines them over several frames of a first
+that wins (`_shaped_winner`; an extremity start lower than the winner without its lead gets
+its proportions too, and wins with the lead after them); `calibrate_shape` refines them over several frames of a first
 pass. The rotation angles of the root lock at a 90
 degree pitch, so an upright body should be tracked in a Y-up frame
 (`tracking.rig.cameras.upright_frame`; `mocap track` does). The spine's side bend and twist
@@ -189,7 +190,9 @@ best against the others' was 0.97 on the Pose2Sim demo, where it won without the
 1.94 m tall against 1.85, and cost the clip's median IoU 0.827 -> 0.794; 0.99 and 0.94 on the
 suite's jump and climb_steps (34.4 -> 33.2 and 8.1 -> 8.8 mm: a wash); under 0.8 nowhere else
 at frame 0. Where the others fail it leads by far: 0.52 and 0.49 on the suite's cartwheel
-upside down (frames 23 and 27, XOR 0.487 -> 0.255 and 0.564 -> 0.279)."""
+upside down (frames 23 and 27, XOR 0.487 -> 0.255 and 0.564 -> 0.279). An extremity start
+lower than the others' best without the lead contends with it: both are given their
+proportions, and the lead is asked of them after that (`_shaped_winner`; session 47)."""
 
 _SECOND_HEIGHT_STARTS = 4
 """A start searched at two heights (`start_heights`) refines at the second only the starts that
@@ -811,18 +814,22 @@ class SilhouetteTracker:
             searches, ranked = [], None
             for height in start_heights(fit.pose, fit.shape, points, up, self.config.voxel_m):
                 self.model = self.body.tracking_model(height)
-                x, score, start, ranked = self._start_search(
+                x, score, start, ranked, contender = self._start_search(
                     masks, fit.pose, points, up, bent, False,
                     only=None if ranked is None else ranked[:_SECOND_HEIGHT_STARTS])
-                searches.append((self.model, x, score, start))
-            self.model, x, score, start = min(searches, key=lambda s: s[2])
-            start += f" at {self.model.shape.height:.2f} m" if len(searches) > 1 else ""
+                searches.append((self.model, x, score, start, contender))
+            self.model, x, score, start, contender = min(searches, key=lambda s: s[2])
+            if len(searches) > 1:
+                start += f" at {self.model.shape.height:.2f} m"
+                if contender is not None:
+                    contender = (contender[0], f"{contender[1]} at "
+                                 f"{self.model.shape.height:.2f} m")
         else:
-            x, score, start, _ = self._start_search(masks, fit.pose, points, up, bent, True,
-                                                    enough)
+            x, score, start, *_ = self._start_search(masks, fit.pose, points, up, bent, True,
+                                                     enough)
         energy = self._energy(masks)
         if estimate_shape and self.config.init_shape:
-            x, swapped = self._shaped_winner(masks, energy, x)
+            x, swapped, start = self._shaped_winner(masks, energy, x, start, contender)
         else:
             x, swapped = self._winner_swapped(energy, x, score)
         message = f"init from visual hull ({len(points)} surface voxels; {start}{swapped})"
@@ -833,12 +840,16 @@ class SilhouetteTracker:
                       up: np.ndarray | None, bent: bool, known_shape: bool,
                       enough: Callable[[float], bool] | None = None,
                       only: Sequence[int] | None = None,
-                      ) -> tuple[np.ndarray, float, str, list[int]]:  # fmt: skip
+                      ) -> tuple[np.ndarray, float, str, list[int],
+                                 tuple[np.ndarray, str] | None]:  # fmt: skip
         """The start of `_initialise_from_hull` with the current model: the hull `fit`, upright
         bodies at `init_headings` headings (crouched ones too where `bent`) and poses on the
         hull's extremities, each refined by the whole hierarchy. Returns the winner, its
-        `_objective` at `final_level`, which start it is, and the starts' indices (the fit, the
-        upright starts, the crouched ones, then the extremities') from the lowest score. bent:
+        `_objective` at `final_level`, which start it is, the starts' indices (the fit, the
+        upright starts, the crouched ones, then the extremities') from the lowest score, and
+        the contender: the best extremity start and which it is, when it scored lower than the
+        winner but without `_EXTREMITY_LEAD`'s lead (a start that sets the shape; else None).
+        The shapes decide between the two (`_shaped_winner`). bent:
         the fit is not upright (`is_upright`), and crouched bodies compete too. known_shape:
         not the start that sets the shape (a recovery); enough: then whether a pose of this
         energy is no divergence: the stances are refined only when none of the hull's own
@@ -892,16 +903,21 @@ class SilhouetteTracker:
         # with the shape known (a recovery), the lowest XOR wins.
         best = start_winner(scores[:len(starts)], scores[len(starts):],
                             1.0 if known_shape else _EXTREMITY_LEAD)
-        if best == 0:
-            start = "its fit"
-        elif best < len(starts):
-            kind = "an upright" if best <= len(uprights) else "a crouched"
-            heading = 360 * ((best - 1) % len(uprights)) // len(uprights)
-            start = f"{kind} start at {heading} deg from its fit"
-        else:
-            start = f"start {best - len(starts) + 1} of {len(ends)} from its extremities"
-        return refined[best], scores[best], start, [int(i) for i in np.argsort(scores,
-                                                                              kind="stable")]
+
+        def which(index: int) -> str:
+            if index == 0:
+                return "its fit"
+            if index < len(starts):
+                kind = "an upright" if index <= len(uprights) else "a crouched"
+                heading = 360 * ((index - 1) % len(uprights)) // len(uprights)
+                return f"{kind} start at {heading} deg from its fit"
+            return f"start {index - len(starts) + 1} of {len(ends)} from its extremities"
+
+        lowest = int(np.argmin(scores))
+        contender = ((refined[lowest], which(lowest)) if lowest >= len(starts) > best
+                     and scores[lowest] < scores[best] else None)  # fmt: skip
+        return (refined[best], scores[best], which(best),
+                [int(i) for i in np.argsort(scores, kind="stable")], contender)
 
     def _side_by_side(self, job: Callable[[int], Any], count: int) -> list[Any]:
         """``[job(0), ..., job(count - 1)]`` of independent jobs, in `TrackConfig.workers`
@@ -930,18 +946,34 @@ class SilhouetteTracker:
         return refined
 
     def _shaped_winner(self, masks: Sequence[np.ndarray], energy: SilhouetteEnergy,
-                       x: np.ndarray) -> tuple[np.ndarray, str]:  # fmt: skip
-        """The winning start `x` of a start that sets the shape, and its left/right swaps
-        (`left_right_swaps`, each refined by the whole hierarchy), each given the subject's
-        proportions (the segment lengths from the silhouettes' outlines with the pose, then the
-        whole hierarchy again: thesis 6.2.4), side by side: the lowest XOR after that wins and
-        sets the model. Returns it and, when a swap won, what the start's message says of it.
+                       x: np.ndarray, start: str = "",
+                       contender: tuple[np.ndarray, str] | None = None,
+                       ) -> tuple[np.ndarray, str, str]:  # fmt: skip
+        """The winning start `x` of a start that sets the shape (`start` says which it is),
+        and its left/right swaps (`left_right_swaps`, each refined by the whole hierarchy),
+        each given the subject's proportions (the segment lengths from the silhouettes'
+        outlines with the pose, then the whole hierarchy again: thesis 6.2.4), side by side:
+        the lowest XOR after that wins and sets the model. Returns it, what the start's message
+        says of a swap that won, and which start it is.
 
         The XOR before the proportions cannot tell: the suite's cartwheel with its noise drawn
         from seed 1 won an upright start's swap of the legs and arms at XOR 0.294 of the
         silhouette area against the start's own 0.316 (173 mm off at frame 0, against 92);
-        with their proportions, 0.243 (163 mm) against 0.165 (52 mm) (session 37)."""
-        poses = [x, *self._refined_swaps(energy, x)]
+        with their proportions, 0.243 (163 mm) against 0.165 (52 mm) (session 37).
+
+        contender: an extremity start (its pose and which it is) that scored lower than `x`
+        before the proportions, without the lead an extremity start needs
+        (`_start_search`): it and its swaps are given theirs too, and it wins when the lowest
+        of them is under `_EXTREMITY_LEAD` times `x`'s lowest. The suite's cartwheel at 24
+        fps: its upright start at 45 degrees won at 13125 px against the extremity start's
+        11510 (0.88), and with their proportions ended at 23.6% XOR, 73 mm off at frame 0,
+        against 14.5%, 15 mm (the track: 3 frames over 100 mm, unflagged; session 47)."""
+        starts = [x] if contender is None else [x, contender[0]]
+        swaps = self._refine_starts(energy, [Pose(y) for s in starts
+                                             for y in left_right_swaps(s)])
+        group = len(SWAPPED) + 1  # a start, then its swaps
+        poses = [y for k, s in enumerate(starts)
+                 for y in (s, *swaps[k * len(SWAPPED):(k + 1) * len(SWAPPED)])]
         base = self.model
 
         def shaped(index: int) -> tuple[np.ndarray, TrackedModel, float]:
@@ -952,10 +984,19 @@ class SilhouetteTracker:
             return y, self.model, self._objective(own, y, self.config.final_level)
 
         results = self._side_by_side(shaped, len(poses))
-        best = int(np.argmin([r[2] for r in results]))
+        lowest = [k * group + int(np.argmin([r[2] for r in results[k * group:(k + 1) * group]]))
+                  for k in range(len(starts))]  # fmt: skip
+        best = lowest[0]
+        if contender is not None and results[lowest[1]][2] < _EXTREMITY_LEAD * results[best][2]:
+            best = lowest[1]
         y, self.model, _ = results[best]
         self._prepare(energy, init=True)  # as `_refine_starts` leaves it
-        return y, "" if best == 0 else f", its {SWAPPED[best - 1]} swapped"
+        swapped = "" if best % group == 0 else f", its {SWAPPED[best % group - 1]} swapped"
+        if best < group:
+            return y, swapped, start
+        return y, "", (f"{contender[1]}{swapped}, with its proportions under "
+                       f"{_EXTREMITY_LEAD:g} times {start}'s ({results[best][2]:.0f} against "
+                       f"{results[lowest[0]][2]:.0f} XOR px)")
 
     def _refined_swaps(self, energy: SilhouetteEnergy, x: np.ndarray) -> list[np.ndarray]:
         """`left_right_swaps` of `x`, each refined by the whole hierarchy (`_refine_starts`)."""

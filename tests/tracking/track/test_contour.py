@@ -175,7 +175,7 @@ def test_a_start_that_sets_the_shape_keeps_the_swap_of_lowest_xor_with_its_propo
     tracker._prepare(energy, init=True)
     swapped = swap_sides(STRIDE.params, "leg")
     assert _mpjpe_mm(Pose(swapped), base, STRIDE, truth_shape) > 60
-    x, note = tracker._shaped_winner(masks, energy, swapped)
+    x, note, _ = tracker._shaped_winner(masks, energy, swapped)
     assert note == ", its legs swapped", note
     assert _mpjpe_mm(Pose(x), tracker.shape, STRIDE, truth_shape) < 15
     assert tracker.shape.thigh / truth_shape.thigh == pytest.approx(1, abs=0.04)

@@ -348,11 +348,106 @@ def test_a_recovery_refines_the_stances_only_when_the_hulls_own_starts_are_not_e
 
     tracker._refine_starts = refine_starts
     enough = None if enough_under is None else (lambda e: e < enough_under)
-    x, score, start, _ = tracker._start_search(
+    x, score, start, *_ = tracker._start_search(
         [], Pose(np.zeros(26)), np.zeros((10, 3)), np.array([0.0, 1.0, 0.0]), False,
         known_shape, enough)  # fmt: skip
     assert refined_batches == batches
     assert int(x[1]) == winner and score == values[winner], start
+
+
+def _stand_in_start_search(monkeypatch, values: list[float]) -> SilhouetteTracker:
+    """A tracker whose start search (`_start_search`) has 12 stand-in starts: the fit 0, the
+    upright starts 1-8 and the extremities' 9-11, start i refined to the score ``values[i]``
+    (its parameter 0; parameter 1 is i)."""
+    import tracking.track.tracker as tracker_module
+    from tests.tracking.track.test_tracker import CAMERAS, SHAPE
+
+    def tagged(index: int) -> Pose:
+        return Pose(np.r_[0.0, float(index), np.zeros(24)])
+
+    tracker = SilhouetteTracker(CAMERAS, TrackConfig(body="superquadric", recovery_passes=1,
+                                                     workers=1), shape=SHAPE)  # fmt: skip
+    monkeypatch.setattr(tracker_module, "upright_starts",
+                        lambda fit, up, headings, pelvis: [tagged(i) for i in range(1, 9)])
+    tracker._best_hypothesis = lambda energy, x: tagged(0)
+    tracker._extremity_starts = lambda energy, points: [tagged(i) for i in (9, 10, 11)]
+    tracker._energy = lambda masks: (lambda pose, level=0: float(pose.params[0]))
+    tracker._objective = lambda energy, x, level: float(x[0])
+    tracker._refine_starts = lambda energy, starts: [
+        np.r_[values[int(p.params[1])], p.params[1], np.zeros(24)] for p in starts]
+    return tracker
+
+
+@pytest.mark.parametrize(("extremity", "known_shape", "winner", "contender"), [
+    (0.9, False, 3, 11),  # lower than the upright start 3's 1.0, without the lead: contends
+    (0.7, False, 11, None),  # under 0.8 times it: wins outright
+    (1.1, False, 3, None),  # higher: nothing to contend
+    (0.9, True, 11, None),  # a recovery (the shape known): the lowest wins
+])
+def test_an_extremity_start_lower_without_the_lead_contends_with_the_winner(
+        monkeypatch, extremity, known_shape, winner, contender):
+    """`_start_search` of a start that sets the shape: an extremity start that scores lower
+    than the fit's and the stances' best but not under `_EXTREMITY_LEAD` times it is the
+    contender, which the proportions decide (`_shaped_winner`)."""
+    values = [5.0, 4.0, 3.0, 1.0, 6.0, 7.0, 8.0, 9.0, 9.5, 2.0, 1.5, extremity]
+    tracker = _stand_in_start_search(monkeypatch, values)
+    x, score, start, _, other = tracker._start_search(
+        [], Pose(np.zeros(26)), np.zeros((10, 3)), np.array([0.0, 1.0, 0.0]), False,
+        known_shape)  # fmt: skip
+    assert int(x[1]) == winner and score == values[winner], start
+    if contender is None:
+        assert other is None
+    else:
+        assert int(other[0][1]) == contender
+        assert other[1] == "start 3 of 3 from its extremities"
+        assert start == "an upright start at 90 deg from its fit"
+
+
+@pytest.mark.parametrize(("shaped", "wins", "note"), [
+    # The winner 3's swaps 1-3 and the contender 11's (4-6) each given their proportions:
+    # the contender's legs swap at 700 is under 0.8 times the winner's best, 1000.
+    ({0: 1000, 1: 1200, 5: 700, 4: 900}, (11, 1), "start 3 of 3 from its extremities, its "
+     "legs swapped, with its proportions under 0.8 times the winner's (700 against 1000 XOR "
+     "px)"),
+    ({0: 1000, 1: 1200, 5: 850, 4: 900}, (3, 0), "the winner"),  # lower, not by the lead
+    ({0: 2000, 2: 1000, 4: 900}, (3, 2), "the winner"),  # the winner's arms swap
+])
+def test_the_proportions_decide_between_the_winner_and_its_contender(monkeypatch, shaped, wins,
+                                                                      note):
+    """`_shaped_winner` with a contender: both starts and their left/right swaps (legs, arms,
+    both) are given their proportions side by side, and the contender wins when its best is
+    under `_EXTREMITY_LEAD` times the winner's best; what the start's message says of it.
+    Stand-ins: a pose's parameter 1 tags its start, parameter 2 its swap (0 itself); pose k
+    of the 8 (the winner's four, then the contender's) scores ``shaped[k]`` (else 9000)."""
+    values = [5.0] * 12
+    tracker = _stand_in_start_search(monkeypatch, values)
+    tracker._refine_starts = lambda energy, starts: [p.params.copy() for p in starts]
+    order = []
+
+    def refine_shape(sequence, poses):
+        order.append((int(poses[0].params[1]), int(round(poses[0].params[2]))))
+        return [Pose(poses[0].params)]
+
+    monkeypatch.setattr(tracker_module_of(), "left_right_swaps",
+                        lambda x: [np.r_[x[:2], float(k), x[3:]] for k in (1, 2, 3)])
+    tracker._refine_shape = refine_shape
+    tracker._refine_all = lambda energy, y, init=False: y
+    tracker._prepare = lambda energy, x=None, init=False: None
+    tracker._objective = lambda energy, y, level: shaped.get(
+        (0 if int(y[1]) == 3 else 4) + int(round(y[2])), 9000.0)
+    winner, contender = (np.r_[0.0, float(i), np.zeros(24)] for i in (3, 11))
+    y, swapped, start = tracker._shaped_winner([], None, winner, "the winner",
+                                               (contender, "start 3 of 3 from its extremities"))
+    assert (int(y[1]), int(round(y[2]))) == wins
+    assert order == [(3, k) for k in range(4)] + [(11, k) for k in range(4)]
+    assert start == note
+    assert swapped == ("" if wins[0] == 11 or wins[1] == 0 else ", its arms swapped")
+
+
+def tracker_module_of():
+    import tracking.track.tracker as tracker_module
+
+    return tracker_module
 
 
 @pytest.mark.slow  # two start searches each: about a minute on 2 shared cores
