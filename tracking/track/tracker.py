@@ -42,8 +42,8 @@ with it (`_winner_swapped`). When the shape is unknown, the shape parameters (th
 lengths, or the skinned body's macro shape and clothing: `TrackedModel.shape_parameters`)
 then come from the outlines, for the winner and each of its swaps, and the lowest XOR after
 that wins (`_shaped_winner`; an extremity start lower than the winner without its lead gets
-its proportions too, and wins with the lead after them); `calibrate_shape` refines them over several frames of a first
-pass. The rotation angles of the root lock at a 90
+its proportions too, and wins with the lead after them); `calibrate_shape` refines them over
+several frames of a first pass. The rotation angles of the root lock at a 90
 degree pitch, so an upright body should be tracked in a Y-up frame
 (`tracking.rig.cameras.upright_frame`; `mocap track` does). The spine's side bend and twist
 stay 0 through this start and the shape pass (`_START_HELD`) and are tracked from then on. A
