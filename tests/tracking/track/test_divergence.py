@@ -323,30 +323,8 @@ def test_a_recovery_refines_the_stances_only_when_the_hulls_own_starts_are_not_e
     only when none of those is enough. Without `enough` every start is refined in one call.
     Stand-ins: start i refines to the score ``values[i]``, which is also its energy; no more
     passes (`recovery_passes` 1)."""
-    import tracking.track.tracker as tracker_module
-    from tests.tracking.track.test_tracker import CAMERAS, SHAPE
-
     values = [5.0, 4.0, 3.0, 0.1, 6.0, 7.0, 8.0, 9.0, 9.5, 2.0, 1.0, 0.2]
-
-    def tagged(index: int) -> Pose:
-        return Pose(np.r_[0.0, float(index), np.zeros(24)])
-
-    tracker = SilhouetteTracker(CAMERAS, TrackConfig(body="superquadric", recovery_passes=1),
-                                shape=SHAPE)  # fmt: skip
-    monkeypatch.setattr(tracker_module, "upright_starts",
-                        lambda fit, up, headings, pelvis: [tagged(i) for i in range(1, 9)])
-    tracker._best_hypothesis = lambda energy, x: tagged(0)
-    tracker._extremity_starts = lambda energy, points: [tagged(i) for i in (9, 10, 11)]
-    tracker._energy = lambda masks: (lambda pose, level=0: float(pose.params[0]))
-    tracker._objective = lambda energy, x, level: float(x[0])
-    refined_batches = []
-
-    def refine_starts(energy, starts):
-        indices = [int(p.params[1]) for p in starts]
-        refined_batches.append(indices)
-        return [np.r_[values[i], float(i), np.zeros(24)] for i in indices]
-
-    tracker._refine_starts = refine_starts
+    tracker, refined_batches = _stand_in_start_search(monkeypatch, values)
     enough = None if enough_under is None else (lambda e: e < enough_under)
     x, score, start, *_ = tracker._start_search(
         [], Pose(np.zeros(26)), np.zeros((10, 3)), np.array([0.0, 1.0, 0.0]), False,
@@ -355,10 +333,12 @@ def test_a_recovery_refines_the_stances_only_when_the_hulls_own_starts_are_not_e
     assert int(x[1]) == winner and score == values[winner], start
 
 
-def _stand_in_start_search(monkeypatch, values: list[float]) -> SilhouetteTracker:
+def _stand_in_start_search(monkeypatch, values: list[float]
+                           ) -> tuple[SilhouetteTracker, list[list[int]]]:  # fmt: skip
     """A tracker whose start search (`_start_search`) has 12 stand-in starts: the fit 0, the
     upright starts 1-8 and the extremities' 9-11, start i refined to the score ``values[i]``
-    (its parameter 0; parameter 1 is i)."""
+    (its parameter 0; parameter 1 is i), which is also its energy; and the starts refined, in
+    the batches `_refine_starts` was given."""
     import tracking.track.tracker as tracker_module
     from tests.tracking.track.test_tracker import CAMERAS, SHAPE
 
@@ -373,9 +353,15 @@ def _stand_in_start_search(monkeypatch, values: list[float]) -> SilhouetteTracke
     tracker._extremity_starts = lambda energy, points: [tagged(i) for i in (9, 10, 11)]
     tracker._energy = lambda masks: (lambda pose, level=0: float(pose.params[0]))
     tracker._objective = lambda energy, x, level: float(x[0])
-    tracker._refine_starts = lambda energy, starts: [
-        np.r_[values[int(p.params[1])], p.params[1], np.zeros(24)] for p in starts]
-    return tracker
+    batches = []
+
+    def refine_starts(energy, starts):
+        indices = [int(p.params[1]) for p in starts]
+        batches.append(indices)
+        return [np.r_[values[i], float(i), np.zeros(24)] for i in indices]
+
+    tracker._refine_starts = refine_starts
+    return tracker, batches
 
 
 @pytest.mark.parametrize(("extremity", "known_shape", "winner", "contender"), [
@@ -390,7 +376,7 @@ def test_an_extremity_start_lower_without_the_lead_contends_with_the_winner(
     than the fit's and the stances' best but not under `_EXTREMITY_LEAD` times it is the
     contender, which the proportions decide (`_shaped_winner`)."""
     values = [5.0, 4.0, 3.0, 1.0, 6.0, 7.0, 8.0, 9.0, 9.5, 2.0, 1.5, extremity]
-    tracker = _stand_in_start_search(monkeypatch, values)
+    tracker, _ = _stand_in_start_search(monkeypatch, values)
     x, score, start, _, other = tracker._start_search(
         [], Pose(np.zeros(26)), np.zeros((10, 3)), np.array([0.0, 1.0, 0.0]), False,
         known_shape)  # fmt: skip
@@ -419,8 +405,7 @@ def test_the_proportions_decide_between_the_winner_and_its_contender(monkeypatch
     under `_EXTREMITY_LEAD` times the winner's best; what the start's message says of it.
     Stand-ins: a pose's parameter 1 tags its start, parameter 2 its swap (0 itself); pose k
     of the 8 (the winner's four, then the contender's) scores ``shaped[k]`` (else 9000)."""
-    values = [5.0] * 12
-    tracker = _stand_in_start_search(monkeypatch, values)
+    tracker, _ = _stand_in_start_search(monkeypatch, [5.0] * 12)
     tracker._refine_starts = lambda energy, starts: [p.params.copy() for p in starts]
     order = []
 
