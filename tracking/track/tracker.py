@@ -967,7 +967,7 @@ class SilhouetteTracker:
         of them is under `_EXTREMITY_LEAD` times `x`'s lowest. The suite's cartwheel at 24
         fps: its upright start at 45 degrees won at 13125 px against the extremity start's
         11510 (0.88), and with their proportions ended at 23.6% XOR, 73 mm off at frame 0,
-        against 14.5%, 15 mm (the track: 3 frames over 100 mm, unflagged; session 47)."""
+        against 14.5%, 15 mm (the track: 3 frames over 100 mm, flagged unexplained; session 47)."""
         starts = [x] if contender is None else [x, contender[0]]
         swaps = self._refine_starts(energy, [Pose(y) for s in starts
                                              for y in left_right_swaps(s)])
