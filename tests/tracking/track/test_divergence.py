@@ -9,6 +9,7 @@ import json
 import numpy as np
 import pytest
 
+import tracking.track.tracker as tracker_module
 from recon.errors import UserError
 from tracking.body.model import Pose
 from tracking.body.motion import read_pose_file
@@ -339,7 +340,6 @@ def _stand_in_start_search(monkeypatch, values: list[float]
     upright starts 1-8 and the extremities' 9-11, start i refined to the score ``values[i]``
     (its parameter 0; parameter 1 is i), which is also its energy; and the starts refined, in
     the batches `_refine_starts` was given."""
-    import tracking.track.tracker as tracker_module
     from tests.tracking.track.test_tracker import CAMERAS, SHAPE
 
     def tagged(index: int) -> Pose:
@@ -413,7 +413,7 @@ def test_the_proportions_decide_between_the_winner_and_its_contender(monkeypatch
         order.append((int(poses[0].params[1]), int(round(poses[0].params[2]))))
         return [Pose(poses[0].params)]
 
-    monkeypatch.setattr(tracker_module_of(), "left_right_swaps",
+    monkeypatch.setattr(tracker_module, "left_right_swaps",
                         lambda x: [np.r_[x[:2], float(k), x[3:]] for k in (1, 2, 3)])
     tracker._refine_shape = refine_shape
     tracker._refine_all = lambda energy, y, init=False: y
@@ -427,12 +427,6 @@ def test_the_proportions_decide_between_the_winner_and_its_contender(monkeypatch
     assert order == [(3, k) for k in range(4)] + [(11, k) for k in range(4)]
     assert start == note
     assert swapped == ("" if wins[0] == 11 or wins[1] == 0 else ", its arms swapped")
-
-
-def tracker_module_of():
-    import tracking.track.tracker as tracker_module
-
-    return tracker_module
 
 
 @pytest.mark.slow  # two start searches each: about a minute on 2 shared cores
