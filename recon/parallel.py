@@ -90,13 +90,18 @@ def fork_map(job: Callable[[int], T], count: int, workers: int) -> list[T]:
 
 class Beside(Generic[T]):
     """``job()`` computed in a forked process beside this one, which goes on meanwhile: `done`
-    says whether it has ended, `result` waits for it (and raises what it raised). Computed
-    here, at once, where `fork_map` would not fork: one worker asked for, no fork, or this
-    process a `fork_map` child or a daemon. `job` sees this process's state as it was at the
-    fork, so it must not depend on what this process does after it; it returns what this
-    process needs (its other changes are lost with the child)."""
+    says whether it has ended, `result` waits for it (and raises what it raised), `cancel`
+    ends it unwaited. Computed here, at once, where `fork_map` would not fork: one worker
+    asked for, no fork, or this process a `fork_map` child or a daemon. `job` sees this
+    process's state as it was at the fork, so it must not depend on what this process does
+    after it; it returns what this process needs (its other changes are lost with the child).
 
-    def __init__(self, job: Callable[[], T], workers: int) -> None:
+    pools: the child may run `fork_map`s of its own (with the workers they ask for; it is then
+    no daemon, and `cancel` ends its pool with it): for a job that is itself side by side
+    work (a tracker's start search) beside work on one core. Else a map in the child runs
+    there, in turn."""
+
+    def __init__(self, job: Callable[[], T], workers: int, *, pools: bool = False) -> None:
         self._outcome: tuple[bool, Any] | None = None
         self._process: Any = None
         if (workers <= 1 or _in_child or multiprocessing.current_process().daemon
@@ -108,8 +113,10 @@ class Beside(Generic[T]):
             return
         context = multiprocessing.get_context("fork")
         self._receive, send = context.Pipe(duplex=False)
-        # daemon: ended with this process (and, as a `fork_map` child, forking no further)
-        self._process = context.Process(target=_send_outcome, args=(job, send), daemon=True)
+        # daemon: ended with this process (and, as a `fork_map` child, forking no further);
+        # with pools, a daemon may not fork: `cancel` ends it.
+        self._process = context.Process(target=_send_outcome, args=(job, send, pools),
+                                         daemon=not pools)  # fmt: skip
         self._process.start()
         send.close()
 
@@ -134,10 +141,31 @@ class Beside(Generic[T]):
             raise value
         return value
 
+    def cancel(self) -> None:
+        """Ends the job unwaited (its child and the child's pool) if it has not ended; its
+        `result` is then an error. Nothing where it has ended or ran here."""
+        if self._outcome is not None:
+            return
+        if self._process.is_alive():
+            self._process.terminate()
+        self._process.join()
+        self._receive.close()
+        self._outcome = (False, RuntimeError("the process beside this one was cancelled"))
 
-def _send_outcome(job: Callable[[], object], send: Any) -> None:
-    """A `Beside` child: the job run as `fork_map`'s children run theirs, its outcome sent."""
-    _enter_child()
+
+def _send_outcome(job: Callable[[], object], send: Any, pools: bool = False) -> None:
+    """A `Beside` child: the job run as `fork_map`'s children run theirs (with `pools`, free
+    to run maps of its own, which a termination ends: `Beside.cancel`), its outcome sent."""
+    if pools:
+        import signal
+
+        def ended(*_: object) -> None:
+            raise SystemExit(1)  # a map's pool is ended by its context on the way out
+
+        signal.signal(signal.SIGTERM, ended)
+        single_blas_thread()
+    else:
+        _enter_child()
     try:
         outcome: tuple[bool, object] = (True, job())
     except Exception as exc:

@@ -66,6 +66,46 @@ def test_a_job_beside_runs_in_another_process_while_this_one_goes_on():
     assert here.done() and here.result()[:2] == (os.getpid(), 11)
 
 
+def test_a_job_beside_with_pools_maps_in_processes_of_its_own_and_cancel_ends_them(tmp_path):
+    def job() -> tuple[int, list[int]]:
+        return os.getpid(), fork_map(lambda _: os.getpid(), 2, 2)
+
+    pid, mapped = Beside(job, 2, pools=True).result()
+    assert pid != os.getpid() and len(set(mapped)) == 2 and pid not in mapped
+
+    def stuck(index: int) -> None:
+        (tmp_path / f"{os.getpid()}.pid").touch()
+        time.sleep(60)
+
+    beside = Beside(lambda: fork_map(stuck, 2, 2), 2, pools=True)
+    deadline = time.monotonic() + 30
+    while len(list(tmp_path.glob("*.pid"))) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    pool = [int(p.stem) for p in tmp_path.glob("*.pid")]
+    assert len(pool) == 2
+    started = time.perf_counter()
+    beside.cancel()
+    assert time.perf_counter() - started < 10 and beside.done()
+    with pytest.raises(RuntimeError, match="cancelled"):
+        beside.result()
+    deadline = time.monotonic() + 10
+    while any(_alive(p) for p in pool) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(_alive(p) for p in pool)  # the child's pool ended with it
+    done = Beside(lambda: 7, 2, pools=True)
+    assert done.result() == 7
+    done.cancel()  # ended: nothing to cancel
+    assert done.result() == 7
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
 @pytest.mark.parametrize("workers", [1, 2])
 def test_a_job_beside_that_fails_raises_in_result(workers):
     def job() -> int:

@@ -116,7 +116,7 @@ from typing import Any
 import numpy as np
 
 from recon.cameras import Camera
-from recon.parallel import fork_map, workers_for
+from recon.parallel import Beside, fork_map, workers_for
 from tracking.body.bvh import rotations_to_channels
 from tracking.body.model import (
     ADDED_PARAMS,
@@ -1171,16 +1171,42 @@ class SilhouetteTracker:
     def _calibrate_shape(self, sequence: Sequence[Sequence[np.ndarray]],
                          progress: Callable[[], object] | None, frames: Sequence[int],
                          ) -> Pose | None:  # fmt: skip
-        """`calibrate_shape` (the start's parameters held)."""
-        stride = max(self.config.shape_stride, 1)
+        """`calibrate_shape` (the start's parameters held).
+
+        The second opinion's search does not depend on the pass: it runs beside it, in a
+        forked process with a pool of its own (`_opinion_beside`), from the pass's start on,
+        and the shape is made from the pass while it runs; where it moves the pass, that is
+        made again. The same results as in turn (the pass's frames and the shape use one core,
+        the search both)."""
         fresh = self._track_state()
         results = [self._pass_start(sequence, frames, fresh)]
         if progress is not None:
             progress()
-        results = self._pass_frames(sequence, results, progress)
-        moved = self._second_opinion(sequence, frames, results, fresh)
+        opinion = self._opinion_beside(sequence, results, fresh)
+        try:
+            results = self._pass_frames(sequence, results, progress)
+            event, made = self._start_event, None
+            if opinion is not None and opinion[0] == results[-1].frame \
+                    and not opinion[1].done():
+                made = self._shape_from_pass(sequence, frames, results)  # (as if it stands)
+            moved = self._second_opinion(sequence, frames, results, fresh, opinion, event)
+        finally:
+            if opinion is not None:
+                opinion[1].cancel()
         if moved is not None:  # (its frames are not counted again)
-            results = self._pass_frames(sequence, [moved], None)
+            made = self._shape_from_pass(sequence, frames,
+                                         self._pass_frames(sequence, [moved], None))
+        elif made is None:
+            made = self._shape_from_pass(sequence, frames, results)
+        return made
+
+    def _shape_from_pass(self, sequence: Sequence[Sequence[np.ndarray]], frames: Sequence[int],
+                         results: list[FrameResult]) -> Pose | None:  # fmt: skip
+        """`calibrate_shape`'s pose of the first frame from the shape pass's `results`: the
+        pass's start tracked back where the frames after it tell it better, the segment
+        lengths from every `shape_stride`-th pose, the pass's start with them, tracked back to
+        frame 0 where the pass started later; the tracker's state as a fresh track needs."""
+        stride = max(self.config.shape_stride, 1)
         first = results[0].frame  # (the pass's start, an index into `sequence`)
         # A start gone wrong is found from the frames after it: the shape comes from those.
         back = self.track_back(results, lambda index: sequence[index])
@@ -1259,35 +1285,73 @@ class SilhouetteTracker:
                 progress()
         return results
 
+    def _opinion_beside(self, sequence: Sequence[Sequence[np.ndarray]],
+                        results: list[FrameResult], fresh: dict[str, Any],
+                        ) -> tuple[int, Beside[tuple[FrameResult, dict[str, Any], int]]] | None:
+        """The second opinion's start search (`_opinion_search`) at the frame the shape pass
+        from `results` (its start) is to end on, beside this process (`Beside`, with a pool of
+        its own: the search's starts side by side), or here, at once, with one worker: (that
+        frame's index, the job). None: no second opinion there (`_has_opinion`)."""
+        stride = max(self.config.shape_stride, 1)
+        first = results[0].frame
+        last = first + (self._pass_length(sequence, first) - 1) // stride * stride
+        if not self._has_opinion(sequence, first, last):
+            return None
+        return last, Beside(lambda: self._opinion_search(sequence, last, fresh),
+                            workers_for(self.config.workers), pools=True)  # fmt: skip
+
+    def _has_opinion(self, sequence: Sequence[Sequence[np.ndarray]], first: int,
+                     last: int) -> bool:
+        """Whether a shape pass from index `first` to `last` of `sequence` gets a second
+        opinion: not with `back_xor_factor` 0, for a pass of one frame, or where `sequence`
+        has fewer frames from `last` than the pass had (a shape from fewer poses)."""
+        return (self.config.back_xor_factor > 0 and last > first
+                and len(sequence) - last >= self._pass_length(sequence, first))
+
+    def _opinion_search(self, sequence: Sequence[Sequence[np.ndarray]], index: int,
+                        fresh: dict[str, Any]) -> tuple[FrameResult, dict[str, Any], int]:
+        """A start searched afresh (from the state `fresh`) at index `index` of `sequence`:
+        its result, the state it left and its energy evaluations, the tracker as it was."""
+        before, event = self.evaluations, self._start_event
+        with self._state_kept():
+            self._set_track_state(fresh)
+            result = self.track(index, sequence[index])
+            state = self._track_state()
+        made, self.evaluations, self._start_event = self.evaluations - before, before, event
+        return result, state, made
+
     def _second_opinion(self, sequence: Sequence[Sequence[np.ndarray]], frames: Sequence[int],
-                        results: list[FrameResult], fresh: dict[str, Any]
-                        ) -> FrameResult | None:  # fmt: skip
-        """A start searched afresh (a shape of its own) at the shape pass's last frame, against
-        what the pass tracked there from its start (`results`): when clearly lower (its XOR
-        times `back_xor_factor` under the pass's), the pass started wrong and tracked on wrong
-        (the suite's bend_pickup from clip frame 150: a start at 27% XOR, 103 mm off, 1.40 m
-        for a 1.56 m subject, tracked at 26-35% XOR, 100-130 mm, and a shape of 1.45 m; a
-        start at its frames 6-23 reaches 13-19%, 30-34 mm, 1.50-1.55 m; session 46), and it
-        runs again from there: returns that start's result, the state as that start left it.
-        None (and the state as it was): the pass stands, or the test is off (`back_xor_factor`
-        0), or the pass is one frame, or `sequence` has fewer frames from there than the pass
-        had (a shape from fewer poses: not searched)."""
-        factor = self.config.back_xor_factor
+                        results: list[FrameResult], fresh: dict[str, Any],
+                        opinion: tuple[int, Beside[tuple[FrameResult, dict[str, Any], int]]]
+                        | None, event: str) -> FrameResult | None:  # fmt: skip
+        """A start searched afresh (a shape of its own, from the state `fresh`) at the shape
+        pass's last frame, against what the pass tracked there from its start (`results`; the
+        start's event was `event`): when clearly lower (its XOR times `back_xor_factor` under
+        the pass's), the pass started wrong and tracked on wrong (the suite's bend_pickup from
+        clip frame 150: a start at 27% XOR, 103 mm off, 1.40 m for a 1.56 m subject, tracked
+        at 26-35% XOR, 100-130 mm, and a shape of 1.45 m; a start at its frames 6-23 reaches
+        13-19%, 30-34 mm, 1.50-1.55 m; session 46), and it runs again from there: returns that
+        start's result, the state set as that start left it. None (the state as it was): the
+        pass stands, or it has no opinion (`_has_opinion`). The search is `opinion`'s
+        (`_opinion_beside`) where the pass ended on its frame, else (the pass lost the
+        subject before it) it runs here."""
         last = results[-1]
-        length = self._pass_length(sequence, results[0].frame)
-        if factor <= 0 or len(results) < 2 or len(sequence) - last.frame < length:
+        if opinion is not None and opinion[0] == last.frame:
+            result, state, made = opinion[1].result()
+        elif self._has_opinion(sequence, results[0].frame, last.frame):
+            result, state, made = self._opinion_search(sequence, last.frame, fresh)
+        else:
             return None
-        kept = self._track_state()
-        self._set_track_state(fresh)
-        result = self.track(last.frame, sequence[last.frame])
-        if result.pose is None or factor * result.xor_fraction >= last.xor_fraction:
-            self._set_track_state(kept)
+        self.evaluations += made
+        if result.pose is None or self.config.back_xor_factor * result.xor_fraction \
+                >= last.xor_fraction:
             return None
+        self._set_track_state(state)
         start = frames[results[0].frame]
         self._start_event = _pass_moved(
             result.event, f"{frames[last.frame]} (XOR {result.xor_fraction:.1%})",
             f"the shape pass from frame {start} had reached XOR {last.xor_fraction:.1%} there "
-            f"(its start: {self._start_event})")
+            f"(its start: {event})")
         return result
 
     def _tracked_to_start(self, sequence: Sequence[Sequence[np.ndarray]],

@@ -5,6 +5,8 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import os
+import time
 
 import numpy as np
 import pytest
@@ -966,14 +968,17 @@ def test_the_shape_pass_refines_the_shape_on_the_poses_tracked_back(monkeypatch)
 
 
 def _pass_over_the_bar(monkeypatch, start_xor, back_statuses=None, tracked_xor=10.0,
-                       **settings):
+                       pause_s=0.0, **settings):
     """`calibrate_shape` over 30 frames (`shape_frames` 12, stride 2) with stand-ins: a start
     (the tracker's history empty) at frame f has XOR start_xor.get(f, 50%) (of a silhouette of
     100, a pose whose parameters are all f), a tracked frame f `tracked_xor` (parameters f),
     and a frame
     tracked backwards status back_statuses.get(f, "tracked") (parameters 100 + f). Returns
     the tracker, its pose, the frames it tracked ((frame, "start"/"track"/"back")), the
-    poses the shape was refined on (their first parameter) and the progress counted."""
+    poses the shape was refined on (their first parameter) and the progress counted. A start
+    searched in another process (the second opinion beside the pass, `workers` 2) takes
+    `pause_s` (so that the pass ends first), and is not in the frames tracked."""
+    parent = os.getpid()
     config = dataclasses.replace(SUPERQUADRIC, shape_frames=12, shape_stride=2, **settings)
     tracker, tracked, refined, progress = SilhouetteTracker(CAMERAS, config), [], [], []
     back_statuses = back_statuses or {}
@@ -986,6 +991,8 @@ def _pass_over_the_bar(monkeypatch, start_xor, back_statuses=None, tracked_xor=1
             return FrameResult(frame, Pose(x + 100.0), 10.0, 100.0, 0, 0.0,
                                "diverged: stand-in" if status == "diverged" else "", status)
         kind = "track" if tracker.history else "start"
+        if os.getpid() != parent:
+            time.sleep(pause_s)
         tracked.append((frame, kind))
         tracker.history = [*tracker.history[-1:], x]
         if kind == "start":
@@ -1011,8 +1018,10 @@ def test_a_shape_pass_whose_start_is_over_the_bar_starts_where_one_is_under_it(m
     tracker, first, tracked, refined, progress = _pass_over_the_bar(
         monkeypatch, {0: 45.0, 3: 40.0, 6: 20.0})
     assert tracked == [(0, "start"), (3, "start"), (6, "start"),
+                       # the second opinion (`_second_opinion`), here at once with one worker
+                       # (`_opinion_beside`): 50%, the pass stands
+                       (16, "start"),
                        *[(f, "track") for f in range(7, 17)],
-                       (16, "start"),  # the second opinion (`_second_opinion`): 50%, stands
                        *[(f, "back") for f in range(5, -1, -1)]]
     assert refined == [6, 8, 10, 12, 14, 16] and tracker.shape_frames_used == refined
     assert first.params[0] == 100.0 and progress == 12
@@ -1052,7 +1061,7 @@ def test_a_shape_pass_tracked_far_above_a_start_searched_at_its_end_runs_again_f
     stands."""
     tracker, first, tracked, refined, progress = _pass_over_the_bar(
         monkeypatch, {0: 27.0, 10: 12.0}, tracked_xor=30.0)
-    assert tracked == [(0, "start"), *[(f, "track") for f in range(1, 11)], (10, "start"),
+    assert tracked == [(0, "start"), (10, "start"), *[(f, "track") for f in range(1, 11)],
                        *[(f, "track") for f in range(11, 21)],
                        *[(f, "back") for f in range(9, -1, -1)]]
     assert refined == [10, 12, 14, 16, 18, 20] and first.params[0] == 100.0 and progress == 12
@@ -1061,10 +1070,36 @@ def test_a_shape_pass_tracked_far_above_a_start_searched_at_its_end_runs_again_f
             in tracker._start_event), tracker._start_event
     _, _, tracked, refined, _ = _pass_over_the_bar(monkeypatch, {0: 27.0, 10: 26.0},
                                                    tracked_xor=30.0)
-    assert tracked[-1] == (10, "start") and refined == [0, 2, 4, 6, 8, 10]
+    assert tracked[1] == (10, "start") and tracked[-1] == (10, "track")
+    assert refined == [0, 2, 4, 6, 8, 10]
     _, _, tracked, refined, _ = _pass_over_the_bar(monkeypatch, {0: 27.0, 10: 12.0},
                                                    tracked_xor=30.0, back_xor_factor=0.0)
-    assert tracked[-1] == (10, "track") and refined == [0, 2, 4, 6, 8, 10]
+    assert (10, "start") not in tracked and refined == [0, 2, 4, 6, 8, 10]
+
+
+def test_the_second_opinion_searches_beside_the_pass_and_the_shape_is_made_meanwhile(
+        monkeypatch):
+    """As above, with 2 workers: the second opinion's search runs in a process beside the pass
+    (`_opinion_beside`: its start at frame 10 is not among this process's frames), and the
+    shape is made from the pass while it runs (refined on 0-10). Where the opinion moves the
+    pass, it runs again from frame 10 and the shape is made again, from 10-20: the same
+    pose, shape and event as in turn (the test above). Where the pass stands, the shape made
+    meanwhile is the one kept."""
+    tracker, first, tracked, refined, progress = _pass_over_the_bar(
+        monkeypatch, {0: 27.0, 10: 12.0}, tracked_xor=30.0, pause_s=1.0, workers=2)
+    assert tracked == [(0, "start"), *[(f, "track") for f in range(1, 21)],
+                       *[(f, "back") for f in range(9, -1, -1)]]
+    assert refined == [0, 2, 4, 6, 8, 10, 10, 12, 14, 16, 18, 20]
+    assert first.params[0] == 100.0 and progress == 12
+    assert ("at frame 110 (XOR 12.0%); segment lengths from the frames from there: the shape "
+            "pass from frame 100 had reached XOR 30.0% there (its start: init from stand-in"
+            in tracker._start_event), tracker._start_event
+    assert tracker.history == [] and sorted(tracker._shape_pass_poses) == list(range(100, 121))
+    tracker, first, tracked, refined, _ = _pass_over_the_bar(
+        monkeypatch, {0: 27.0, 10: 26.0}, tracked_xor=30.0, pause_s=1.0, workers=2)
+    assert tracked == [(0, "start"), *[(f, "track") for f in range(1, 11)]]
+    assert refined == [0, 2, 4, 6, 8, 10] and first.params[0] == 0.0
+    assert tracker._start_event == "init from stand-in; segment lengths from the first frames"
 
 
 def test_cli_track_needs_a_video_workspace(tmp_path):
