@@ -50,7 +50,7 @@ import dataclasses
 import functools
 import io
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -263,7 +263,7 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         0, len(frames) - 1, min(step.logged_images, len(frames))).round().astype(int))}
     shape_pass = Timer()  # its seconds stay 0 without a shape pass
     with (Timer() as timer, _Recorder(ws, upright, frame_rate, logged) as recorder,
-          single_blas_thread(), _unsettled_ended(tracker)):
+          single_blas_thread()):
         if init_model is None and config.shape_frames > 1:
             # (A start over the bar moves the pass on, up to `shape_frames` - 1 frames, and a
             # second opinion at its end once more: those are read too, `calibrate_shape`.)
@@ -272,15 +272,14 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
                                enabled=progress)
             try:
                 with shape_pass:
-                    # Its second opinion may still run when it returns: the first frames are
-                    # tracked meanwhile, and settled below.
                     init_pose = tracker.calibrate_shape(
                         FramesRead(shape_frames, masks_of), progress=bar.update,
-                        frames=shape_frames, settle_later=True)
+                        frames=shape_frames)
             except TrackingLost as exc:
                 raise UserError(f"cannot start tracking at frame {frames[first]}: {exc}"
                                 ) from None
             bar.close()
+            warnings.extend(_short_shape_pass(config, shape_frames, tracker.shape_frames_used))
         bar = progress_bar(len(frames), "track", "frame", enabled=progress)
         # The frames a track back may still replace (the opening, `track_back`; a divergence
         # or loss a later frame recovers from, `track_back_gap`: the last `back_frames`) are
@@ -301,32 +300,13 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
                     results[i] = again
                 pending = None
 
-        index, settle_s, since = 0, 0.0, time.perf_counter()
-        while index < len(frames):
-            frame = frames[index]
+        for index, frame in enumerate(frames):
             masks = masks_of(frame)
             result = tracker.track(frame, masks, init=init_pose if index == first else None)
             results.append(result)
             held.add(frame, masks)
             bar.set_postfix_str(f"XOR {result.xor_fraction:.0%} {result.event}"[:40])
             bar.update()
-            if tracker.shape_unsettled and (
-                    tracker.shape_settles() or index == opening_end or index + 1 == len(frames)
-                    or result.status == "recovered" or len(results) > tracker.back_frames):
-                # The shape pass's second opinion, before a track back reads these frames or
-                # one is recorded: where it moved the pass, the shape is another, and the
-                # track starts again from the first frame (nothing of it is kept).
-                bar.set_postfix_str("the start's second opinion")
-                started = time.perf_counter()
-                moved, pose = tracker.settle_shape()
-                settle_s += time.perf_counter() - started
-                if moved:
-                    settle_s += started - since  # (the frames tracked meanwhile, dropped)
-                    init_pose, index, since = pose, 0, time.perf_counter()
-                    results.clear()
-                    held = HeldMasks()
-                    bar.reset()
-                    continue
             started = time.perf_counter()
             if pending is not None and pending[1].done():
                 settle()
@@ -351,15 +331,12 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
                    and (pending is None or recorded < pending[0])):
                 recorder.frame(tracker, results[recorded], held.pop(results[recorded].frame))
                 recorded += 1
-            index += 1
         started = time.perf_counter()
         settle()
         back_s += time.perf_counter() - started
         for r in results[recorded:]:
             recorder.frame(tracker, r, held.pop(r.frame))
         bar.close()
-        if init_model is None and config.shape_frames > 1:
-            warnings.extend(_short_shape_pass(config, shape_frames, tracker.shape_frames_used))
     if tracker.model is None or all(r.pose is None for r in results):
         reasons = sorted({r.event.removeprefix("lost: ") for r in results})
         raise UserError(f"the subject was lost in every frame ({'; '.join(reasons[:3])}"
@@ -379,9 +356,7 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
         "median_xor_fraction": float(np.median([r.xor_fraction for r in tracked])),
         "seconds_per_frame": timer.seconds / len(results),
         # Where the time went: the start and shape pass, once per sequence, then each frame.
-        # (With its second opinion's wait, where the first frames were tracked meanwhile, and
-        # where it moved the pass, those frames and the pass again.)
-        "shape_pass_seconds": shape_pass.seconds + settle_s,
+        "shape_pass_seconds": shape_pass.seconds,
         # Tracking frames again backwards, from the opening's lowest XOR and from recoveries:
         # the time the track waited for it (beside the track, with workers, it takes more).
         "track_back_seconds": back_s,
@@ -397,16 +372,6 @@ def track_workspace(ws: Workspace, step: TrackStepConfig, config: TrackConfig, *
     ws.record_step("track", fp, outputs=list(outputs.values()), config=settings,
                    seconds=timer.seconds, summary=summary)
     return summary
-
-
-@contextlib.contextmanager
-def _unsettled_ended(tracker: SilhouetteTracker) -> Iterator[None]:
-    """A track given up (an error) ends a second opinion still running beside it
-    (`SilhouetteTracker.cancel_unsettled`)."""
-    try:
-        yield
-    finally:
-        tracker.cancel_unsettled()
 
 
 def _short_shape_pass(config: TrackConfig, frames: list[int], used: list[int]) -> list[str]:

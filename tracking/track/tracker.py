@@ -722,9 +722,6 @@ class SilhouetteTracker:
         # (masks, points, up, band): the frame's hull (`_frame_hull`), for its last masks
         self._hull: tuple[object, np.ndarray, np.ndarray | None, list | None] | None = None
         self._mend_failed_at: int | None = None  # the frame of the last mend that found nothing
-        # `calibrate_shape`'s second opinion left running (`settle_shape`): (sequence, frames,
-        # the pass's results, the fresh state, the opinion, the start's event)
-        self._unsettled: tuple[Any, ...] | None = None
         self.evaluations = 0
         # How `calibrate_shape` found the pose it returns: the first tracked frame starts from
         # it as from a given pose, and says this instead.
@@ -1141,8 +1138,7 @@ class SilhouetteTracker:
 
     def calibrate_shape(self, sequence: Sequence[Sequence[np.ndarray]],
                         progress: Callable[[], object] | None = None,
-                        frames: Sequence[int] | None = None,
-                        settle_later: bool = False) -> Pose | None:
+                        frames: Sequence[int] | None = None) -> Pose | None:
         """The subject's shape from the first frames of a sequence (masks per frame), before
         tracking it: a frame is initialised (with its own shape estimate), the frames after it
         up to the last `shape_stride`-th of `shape_frames` are tracked, and every
@@ -1165,29 +1161,23 @@ class SilhouetteTracker:
         it under the bar, and the first frame's start is searched with the shape); the
         tracker then starts afresh from it and its event says how it was found (not "the
         given pose"). frames: the frame numbers of `sequence` (default 0, 1, ...), by which a
-        recovery in these frames later finds the pose the pass gave it (`_recover`).
-        settle_later: return before the second opinion has ended, if it runs beside the pass
-        (`shape_unsettled`), its pose as if the pass stands; the track may go on meanwhile,
-        and `settle_shape` says whether it stands (`mocap track` tracks the first frames
-        while it runs)."""
+        recovery in these frames later finds the pose the pass gave it (`_recover`)."""
         if self.shape is not None:
             raise ValueError("the shape is already known")
         with self._searching_start():
             return self._calibrate_shape(sequence, progress,
-                                         range(len(sequence)) if frames is None else frames,
-                                         settle_later)  # fmt: skip
+                                         range(len(sequence)) if frames is None else frames)
 
     def _calibrate_shape(self, sequence: Sequence[Sequence[np.ndarray]],
                          progress: Callable[[], object] | None, frames: Sequence[int],
-                         settle_later: bool = False) -> Pose | None:  # fmt: skip
+                         ) -> Pose | None:  # fmt: skip
         """`calibrate_shape` (the start's parameters held).
 
         The second opinion's search does not depend on the pass: it runs beside it, in a
         forked process with a pool of its own (`_opinion_beside`), from the pass's start on,
         and the shape is made from the pass while it runs; where it moves the pass, that is
         made again. The same results as in turn (the pass's frames and the shape use one core,
-        the search both). With `settle_later`, a search still running then is left running
-        (`settle_shape`)."""
+        the search both)."""
         fresh = self._track_state()
         results = [self._pass_start(sequence, frames, fresh)]
         if progress is not None:
@@ -1199,10 +1189,6 @@ class SilhouetteTracker:
             if opinion is not None and opinion[0] == results[-1].frame \
                     and not opinion[1].done():
                 made = self._shape_from_pass(sequence, frames, results)  # (as if it stands)
-                if settle_later:  # (`settle_shape` waits for it)
-                    self._unsettled = (sequence, frames, results, fresh, opinion, event)
-                    opinion = None
-                    return made
             moved = self._second_opinion(sequence, frames, results, fresh, opinion, event)
         finally:
             if opinion is not None:
@@ -1213,43 +1199,6 @@ class SilhouetteTracker:
         elif made is None:
             made = self._shape_from_pass(sequence, frames, results)
         return made
-
-    @property
-    def shape_unsettled(self) -> bool:
-        """Whether `calibrate_shape` (with `settle_later`) returned before its second opinion
-        ended: `settle_shape` says whether its pose stands."""
-        return self._unsettled is not None
-
-    def shape_settles(self) -> bool:
-        """Whether `settle_shape` would return without waiting (True when nothing is
-        unsettled)."""
-        return self._unsettled is None or self._unsettled[4][1].done()
-
-    def settle_shape(self) -> tuple[bool, Pose | None]:
-        """The second opinion of a `calibrate_shape` that returned before it ended, waited
-        for: (False, None) where the pass stands (the shape, and the track since, stay), or
-        (True, the first frame's pose as `calibrate_shape` returns it) where it moved the
-        pass, which ran again from there: the shape is another, and the track starts afresh
-        from that pose. (False, None) when nothing is unsettled."""
-        if self._unsettled is None:
-            return False, None
-        sequence, frames, results, fresh, opinion, event = self._unsettled
-        self._unsettled = None
-        with self._searching_start():
-            try:
-                moved = self._second_opinion(sequence, frames, results, fresh, opinion, event)
-            finally:
-                opinion[1].cancel()
-            if moved is None:
-                return False, None
-            return True, self._shape_from_pass(sequence, frames,
-                                               self._pass_frames(sequence, [moved], None))
-
-    def cancel_unsettled(self) -> None:
-        """Ends an unsettled second opinion unwaited (`settle_shape`; a track given up)."""
-        if self._unsettled is not None:
-            self._unsettled[4][1].cancel()
-            self._unsettled = None
 
     def _shape_from_pass(self, sequence: Sequence[Sequence[np.ndarray]], frames: Sequence[int],
                          results: list[FrameResult]) -> Pose | None:  # fmt: skip

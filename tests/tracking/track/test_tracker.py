@@ -1102,63 +1102,6 @@ def test_the_second_opinion_searches_beside_the_pass_and_the_shape_is_made_meanw
     assert tracker._start_event == "init from stand-in; segment lengths from the first frames"
 
 
-@pytest.mark.parametrize("moved", [True, False])
-def test_mocap_track_tracks_on_while_the_second_opinion_runs_and_again_where_it_moved(
-        tmp_path, monkeypatch, moved):
-    """`mocap track` takes the shape pass's pose while its second opinion still runs beside it
-    (`calibrate_shape` with `settle_later`) and tracks the first frames meanwhile; once the
-    opinion has ended (here after 3 frames) it is settled (`settle_shape`). Where it moved the
-    pass, the track starts again from frame 0 with the pose it gives, and nothing of the first
-    try is kept: each frame is in pose.json and the recording once, from the second try.
-    Where it stands, the track goes on. (The tracker's start, track and opinion are stand-ins
-    on a synthetic 8-frame walk: what is checked is the order and what is kept.)"""
-    from recon.workspace import Workspace
-    from tests.helpers import read_recording
-    from tracking.body.bvh import write_bvh
-    from tracking.body.motion import motion_from_poses
-    from tracking.body.synthetic import walking_poses
-    from tracking.rig.synth import SynthConfig, synthesize
-    from tracking.track.step import TrackStepConfig, track_workspace
-
-    bvh, ws = tmp_path / "walk.bvh", tmp_path / "ws"
-    write_bvh(motion_from_poses(walking_poses(8, 30.0, SHAPE), SHAPE, 1 / 30), bvh)
-    synthesize(ws, SynthConfig(bvh=bvh, size="160x120", cameras=3, clean=True,
-                               body="superquadric"))  # fmt: skip
-    tracked, settled = [], []
-    first_try, second_try = np.full(N_POSE_PARAMS, 0.01), np.full(N_POSE_PARAMS, 0.02)
-
-    def calibrate_shape(self, sequence, progress=None, frames=None, settle_later=False):
-        assert settle_later
-        self.model, self._unsettled = MODEL, ("a stand-in opinion",)
-        return Pose(first_try)
-
-    def settle_shape(self):
-        settled.append(len(tracked))
-        self._unsettled = None
-        return (True, Pose(second_try)) if moved else (False, None)
-
-    def track(self, frame, masks, init=None):
-        tracked.append((frame, None if init is None else float(init.params[0])))
-        x = init.params if init is not None else np.full(N_POSE_PARAMS, frame / 100)
-        return FrameResult(frame, Pose(x), 1.0, 100.0, 0, 0.0, "stand-in",
-                           "init" if init is not None else "tracked")  # fmt: skip
-
-    monkeypatch.setattr(SilhouetteTracker, "calibrate_shape", calibrate_shape)
-    monkeypatch.setattr(SilhouetteTracker, "settle_shape", settle_shape)
-    monkeypatch.setattr(SilhouetteTracker, "shape_settles", lambda self: len(tracked) >= 3)
-    monkeypatch.setattr(SilhouetteTracker, "track", track)
-    summary = track_workspace(Workspace(ws), TrackStepConfig(), SUPERQUADRIC, progress=False)
-    again = [(0, 0.02)] if moved else []
-    assert tracked == [(0, 0.01), (1, None), (2, None), *again,
-                       *[(f, None) for f in range(1 if moved else 3, 8)]]
-    assert settled == [3] and summary["tracked"] == 8
-    pose = json.loads((ws / "tracks" / "pose.json").read_text())
-    assert [f["frame"] for f in pose["frames"]] == list(range(8))
-    assert pose["frames"][0]["params"][0] == pytest.approx(0.02 if moved else 0.01)
-    read = read_recording(ws / "logs" / "track.rrd")
-    assert read.rows("track/status_index", "frame") == list(range(8))
-
-
 def test_cli_track_needs_a_video_workspace(tmp_path):
     result = run_cli("track", tmp_path)
     assert result.returncode == 2 and "not a video workspace" in result.stderr
