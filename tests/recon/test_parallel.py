@@ -71,7 +71,8 @@ def test_a_job_beside_with_pools_maps_in_processes_of_its_own_and_cancel_ends_th
         return os.getpid(), fork_map(lambda _: os.getpid(), 2, 2)
 
     pid, mapped = Beside(job, 2, pools=True).result()
-    assert pid != os.getpid() and len(set(mapped)) == 2 and pid not in mapped
+    # (in the pool's processes: which of them takes which job is the pool's)
+    assert pid != os.getpid() and pid not in mapped and os.getpid() not in mapped
 
     def stuck(index: int) -> None:
         (tmp_path / f"{os.getpid()}.pid").touch()
