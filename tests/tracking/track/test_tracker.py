@@ -968,7 +968,7 @@ def test_the_shape_pass_refines_the_shape_on_the_poses_tracked_back(monkeypatch)
 
 
 def _pass_over_the_bar(monkeypatch, start_xor, back_statuses=None, tracked_xor=10.0,
-                       pause_s=0.0, **settings):
+                       pause_s=0.0, lost_from=None, **settings):
     """`calibrate_shape` over 30 frames (`shape_frames` 12, stride 2) with stand-ins: a start
     (the tracker's history empty) at frame f has XOR start_xor.get(f, 50%) (of a silhouette of
     100, a pose whose parameters are all f), a tracked frame f `tracked_xor` (parameters f),
@@ -977,7 +977,8 @@ def _pass_over_the_bar(monkeypatch, start_xor, back_statuses=None, tracked_xor=1
     the tracker, its pose, the frames it tracked ((frame, "start"/"track"/"back")), the
     poses the shape was refined on (their first parameter) and the progress counted. A start
     searched in another process (the second opinion beside the pass, `workers` 2) takes
-    `pause_s` (so that the pass ends first), and is not in the frames tracked."""
+    `pause_s` (so that the pass ends first), and is not in the frames tracked. A frame tracked
+    from `lost_from` on is lost."""
     parent = os.getpid()
     config = dataclasses.replace(SUPERQUADRIC, shape_frames=12, shape_stride=2, **settings)
     tracker, tracked, refined, progress = SilhouetteTracker(CAMERAS, config), [], [], []
@@ -994,6 +995,8 @@ def _pass_over_the_bar(monkeypatch, start_xor, back_statuses=None, tracked_xor=1
         if os.getpid() != parent:
             time.sleep(pause_s)
         tracked.append((frame, kind))
+        if kind == "track" and lost_from is not None and frame >= lost_from:
+            return FrameResult(frame, None, 100.0, 100.0, 0, 0.0, "lost: stand-in", "lost")
         tracker.history = [*tracker.history[-1:], x]
         if kind == "start":
             return FrameResult(frame, Pose(x), start_xor.get(frame, 50.0), 100.0, 0, 0.0,
@@ -1100,6 +1103,23 @@ def test_the_second_opinion_searches_beside_the_pass_and_the_shape_is_made_meanw
     assert tracked == [(0, "start"), *[(f, "track") for f in range(1, 11)]]
     assert refined == [0, 2, 4, 6, 8, 10] and first.params[0] == 0.0
     assert tracker._start_event == "init from stand-in; segment lengths from the first frames"
+
+
+def test_a_pass_that_loses_the_subject_before_the_opinions_frame_gets_one_at_its_own_end(
+        monkeypatch):
+    """The pass from frame 0 loses the subject at frame 6, before the frame its second opinion
+    searches beside it (10): that search is given up unwaited (it would take 30 s), and the
+    opinion is searched here at the pass's own last frame (5), as the pass ended there; at
+    12% against the pass's 30% it moves the pass, which runs again from 5."""
+    started = time.perf_counter()
+    tracker, first, tracked, refined, _ = _pass_over_the_bar(
+        monkeypatch, {0: 27.0, 5: 12.0}, tracked_xor=30.0, pause_s=30.0, lost_from=6,
+        workers=2)
+    assert time.perf_counter() - started < 15
+    assert tracked[:8] == [(0, "start"), *[(f, "track") for f in range(1, 7)], (5, "start")]
+    # (no shape made from the pass meanwhile: it ended before the opinion's frame; the pass
+    # again from 5 loses the subject at 6 too, and the shape comes from 5 alone)
+    assert refined == [5] and "at frame 105 (XOR 12.0%)" in tracker._start_event
 
 
 def test_cli_track_needs_a_video_workspace(tmp_path):
