@@ -3,7 +3,8 @@ the way users run the tracker.
 
     .venv/bin/python benchmarks/tracking_suite.py [--clips NAME ...] [--frames N]
         [--start N | NAME=N ...]
-        [--trackers current former no-extremities no-floor-band crouched no-back]
+        [--trackers current former no-extremities no-floor-band crouched no-back
+         range-480]
         [--size WxH] [--keep DIR] [--repeats N] [--seeds S ...] [--fps F ...]
 
 Each clip (`CLIPS`: walk, run, jump, cartwheel, ...; some in Daz naming, which the BVH
@@ -31,6 +32,9 @@ path scored. ``--trackers`` (default: all six, on the same silhouettes):
   (``--init-crouched``; session 39, not the default).
 * ``no-back``: no opening tracked again backwards (``--back-xor-factor 0``), as before
   session 40.
+* ``range-480``: a limb grid's smallest half-range 480 degrees per second of the frame
+  interval (``--min-range-deg-s 480``: 16 degrees at 30 fps, 8 at 60) against the default
+  240, the README's open question for video frame rates (session 48).
 
 Printed per clip and tracker (`tracking_synthetic.track_case`): MPJPE against the subject's
 own joints (gt/joints.csv), raw and with each joint's mean offset over the clip removed; the
@@ -765,6 +769,7 @@ TRACKERS: dict[str, list[str]] = {
     "no-floor-band": ["--floor-band-m", "0"],
     "crouched": ["--init-crouched"],
     "no-back": ["--back-xor-factor", "0"],
+    "range-480": ["--min-range-deg-s", "480"],
 }
 """`mocap track` flags of each tracker (see the module docstring)."""
 RECOVERY_FRAMES = 5

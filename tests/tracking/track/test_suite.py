@@ -81,3 +81,24 @@ def test_the_suite_synthesises_a_clip_at_each_frame_rate_as_a_clip_of_its_own(
     for ws, fps in (("walk", "30"), ("walk-60fps", "60"), ("walk@1-25fps", "25")):
         flags = synthesised[ws]
         assert flags[flags.index("--fps") + 1] == fps, flags
+
+
+def test_every_tracker_of_the_suite_is_mocap_tracks_flags(monkeypatch: pytest.MonkeyPatch):
+    """Each of the suite's trackers (`tracking_suite.TRACKERS`) is flags `mocap track` takes
+    (a misspelt one would fail every clip of a long run, at its first track), and a tracker
+    that differs from ``current`` sets what it names (``range-480``: the limb grid's smallest
+    half-range, 240 degrees per second by default)."""
+    from recon.cli import build_parser
+    from tracking.track.tracker import TrackConfig
+
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    from tracking_suite import TRACKERS
+
+    argv = ["track", "ws"]
+    parser, command, broken = build_parser(argv)
+    assert command is not None and broken is None
+    for name, flags in TRACKERS.items():
+        args = parser.parse_args([*argv, *flags])
+        assert args.command == "track", name
+    assert parser.parse_args([*argv, *TRACKERS["range-480"]]).min_range_deg_s == 480.0
+    assert TrackConfig().min_range_deg_s == 240.0
