@@ -22,6 +22,7 @@ import contextlib
 import dataclasses
 import multiprocessing
 import os
+import signal
 from collections.abc import Callable
 from typing import Any, Generic, TypeVar
 
@@ -157,8 +158,6 @@ def _send_outcome(job: Callable[[], object], send: Any, pools: bool = False) -> 
     """A `Beside` child: the job run as `fork_map`'s children run theirs (with `pools`, free
     to run maps of its own, which a termination ends: `Beside.cancel`), its outcome sent."""
     if pools:
-        import signal
-
         def ended(*_: object) -> None:
             raise SystemExit(1)  # a map's pool is ended by its context on the way out
 
@@ -188,6 +187,12 @@ def single_blas_thread() -> contextlib.AbstractContextManager[object]:
 def _enter_child() -> None:
     global _in_child
     _in_child = True
+    # A map's pool ends its idle children with SIGTERM: they die at once, whatever handler
+    # the process that forked them had. A `Beside` with pools has one (raising SystemExit):
+    # a child that the SIGTERM met while forking ran it in `threading._after_fork`, which
+    # ignores exceptions, and it then waited on the pool's lock for ever, and the pool for it
+    # (about one map in a thousand; 2 of 10 tracks of session 48's 60 fps runs hung).
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     single_blas_thread()  # for the child's life: it ends with the map
 
 

@@ -93,6 +93,14 @@ def test_a_job_beside_with_pools_maps_in_processes_of_its_own_and_cancel_ends_th
     while any(_alive(p) for p in pool) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert not any(_alive(p) for p in pool)  # the child's pool ended with it
+    # The pool's children die of the SIGTERM that ends a map's pool, whatever the child
+    # beside them does with one (a handler there, run by a child still forking, was ignored,
+    # and the pool waited for it for ever: `_enter_child`).
+    import signal
+
+    defaults = Beside(lambda: fork_map(
+        lambda _: signal.getsignal(signal.SIGTERM) == signal.SIG_DFL, 2, 2), 2, pools=True)
+    assert defaults.result() == [True, True]
     done = Beside(lambda: 7, 2, pools=True)
     assert done.result() == 7
     done.cancel()  # ended: nothing to cancel
