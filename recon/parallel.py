@@ -98,9 +98,9 @@ class Beside(Generic[T]):
     after it; it returns what this process needs (its other changes are lost with the child).
 
     pools: the child may run `fork_map`s of its own (with the workers they ask for; it is then
-    no daemon, and `cancel` ends its pool with it): for a job that is itself side by side
-    work (a tracker's start search) beside work on one core. Else a map in the child runs
-    there, in turn."""
+    no daemon, in a process group of its own with its pool, which `cancel` ends): for a job
+    that is itself side by side work (a tracker's start search) beside work on one core. Else
+    a map in the child runs there, in turn."""
 
     def __init__(self, job: Callable[[], T], workers: int, *, pools: bool = False) -> None:
         self._outcome: tuple[bool, Any] | None = None
@@ -119,6 +119,10 @@ class Beside(Generic[T]):
         self._process = context.Process(target=_send_outcome, args=(job, send, pools),
                                          daemon=not pools)  # fmt: skip
         self._process.start()
+        if pools:  # (the child sets it too: whichever runs first)
+            with contextlib.suppress(OSError):
+                os.setpgid(self._process.pid, self._process.pid)
+        self._pools = pools
         send.close()
 
     def done(self) -> bool:
@@ -147,8 +151,18 @@ class Beside(Generic[T]):
         `result` is then an error. Nothing where it has ended or ran here."""
         if self._outcome is not None:
             return
-        if self._process.is_alive():
+        if not self._pools:
             self._process.terminate()
+        else:
+            # Its pool's children die at once (`_enter_child`), and it leaves by SystemExit,
+            # its pools reaped; where that does not end it in 10 s (a handler that ran where
+            # exceptions are ignored), all are killed.
+            for sig, wait_s in ((signal.SIGTERM, 10.0), (signal.SIGKILL, None)):
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(self._process.pid, sig)
+                self._process.join(wait_s)
+                if not self._process.is_alive():
+                    break
         self._process.join()
         self._receive.close()
         self._outcome = (False, RuntimeError("the process beside this one was cancelled"))
@@ -158,6 +172,9 @@ def _send_outcome(job: Callable[[], object], send: Any, pools: bool = False) -> 
     """A `Beside` child: the job run as `fork_map`'s children run theirs (with `pools`, free
     to run maps of its own, which a termination ends: `Beside.cancel`), its outcome sent."""
     if pools:
+        with contextlib.suppress(OSError):
+            os.setpgid(0, 0)  # (`Beside.cancel` ends the group)
+
         def ended(*_: object) -> None:
             raise SystemExit(1)  # a map's pool is ended by its context on the way out
 

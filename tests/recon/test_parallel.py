@@ -101,6 +101,16 @@ def test_a_job_beside_with_pools_maps_in_processes_of_its_own_and_cancel_ends_th
     defaults = Beside(lambda: fork_map(
         lambda _: signal.getsignal(signal.SIGTERM) == signal.SIG_DFL, 2, 2), 2, pools=True)
     assert defaults.result() == [True, True]
+
+    def deaf() -> None:  # a job the SIGTERM does not end (as one that ignored its SystemExit)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        time.sleep(60)
+
+    beside = Beside(deaf, 2, pools=True)
+    time.sleep(0.5)
+    started = time.perf_counter()
+    beside.cancel()  # killed after 10 s
+    assert time.perf_counter() - started < 20 and not _alive(beside._process.pid)
     done = Beside(lambda: 7, 2, pools=True)
     assert done.result() == 7
     done.cancel()  # ended: nothing to cancel
