@@ -686,6 +686,39 @@ these runs shared the 2 cores three or four at a time on the slow hour: their fr
 (0.16-1.03) are not figures of the code. A contender costs one more `_shaped_winner` (4
 jobs) where it runs.
 
+Session 48, the same AMD EPYC at about session 47's speed. Speed with the tracks unchanged: the
+second opinion's start search does not depend on the shape pass, so it runs beside it, in a
+forked process with a pool of its own (`recon.parallel.Beside` with ``pools``), from the pass's
+start on, and the shape is made from the pass meanwhile (again where the opinion moves the
+pass). The seed-0 walk, in turn against session 47's code (A B A B, `mocap track` alone): the
+start and shape pass 50.7 and 49.0 s against 62.0 and 56.5, the track 76.2 and 73.1 s against
+87.5 and 78.9 (earlier in the session 79.5 against 90.9; the jump, whose pass the opinion
+moves, 81.8 against 87.9 and 90.8 against 86.3; the cartwheel 97.2 against 91.1: runs of one
+code differ by 10% from one to the next here). joints.csv byte-identical on those clips, on the
+15 clips at 60 fps and the 12 from clip frame 150. Tried and dropped: `mocap track` going on
+with the first frames while the opinion still ran, and starting again where it moved the pass
+(walk 76.6 against 83.9 s, but the jump 99.1 against 82.6: the track and the opinion shared
+the cores, and the frames tracked meanwhile were lost). Found on the way: a map inside such a
+process hung about one time in a thousand (2 of 10 tracks): the pool's idle children had
+inherited the SIGTERM handler that lets `Beside.cancel` end the process, and one that the
+pool's SIGTERM met while it was forking ran it where exceptions are ignored, then waited on the
+pool's lock for ever. A map's children now end at SIGTERM whatever their parent does, and a
+process beside with pools is a process group that `cancel` ends (killed after 10 s).
+
+The 60 fps set with session 47's contender (`--fps 60`, the workspaces kept from session 47
+tracked again): the 15 clips byte-identical to session 46's code, mean **8.8 mm** (no
+contender won there). From clip frame 150 (the 12 clips): mean **8.4 mm** (session 46: 7.8),
+none above 50 mm, none unrecovered, no frame over 100 mm; bend_pickup 6.8, the cartwheel 6.9
+(as in session 46), but arms_overhead **20.2** (12.7 in session 41; about 12.7 in session 46's
+mean), as arms_overhead at seed 0 printed 8.3 in session 47 against 6.3 in 46: the same code
+on the same clip tracks differently between sessions (this machine's floating point: its
+OpenBLAS runs the Haswell kernels on an AMD EPYC whose flags the host sets), not looked into
+further. `--min-range-deg-s 480` at 60 fps (the ``range-480`` tracker; the README's open
+question), the same 15 workspaces: mean 9.5 mm against 8.8 with the default 240, better on
+5 clips (the run 12.6 -> 9.5, bend_pickup 10.0 -> 8.9) and worse on 9 (the cartwheel 16.6 ->
+25.7, the squat 16.7 -> 19.7, climb_steps 6.1 -> 7.5); none above 50 mm, none unrecovered, no
+frame over 100 mm. Not better on the suite at 60 fps: the default stays 240.
+
 Measured (session 21, ``--frames 30``, the current tracker with its defaults, on a snapshot
 of the code run with ``--init-twists 1 --init-starts 1``, the defaults since; 2 cores shared
 with one other job, so frames/s are low bounds). MPJPE (offsets out), worst joint, frames/s,
