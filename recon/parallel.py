@@ -105,6 +105,7 @@ class Beside(Generic[T]):
     def __init__(self, job: Callable[[], T], workers: int, *, pools: bool = False) -> None:
         self._outcome: tuple[bool, Any] | None = None
         self._process: Any = None
+        self._pools = pools
         if (workers <= 1 or _in_child or multiprocessing.current_process().daemon
                 or "fork" not in multiprocessing.get_all_start_methods()):
             try:
@@ -122,7 +123,6 @@ class Beside(Generic[T]):
         if pools:  # (the child sets it too: whichever runs first)
             with contextlib.suppress(OSError):
                 os.setpgid(self._process.pid, self._process.pid)
-        self._pools = pools
         send.close()
 
     def done(self) -> bool:

@@ -1263,17 +1263,22 @@ class SilhouetteTracker:
         those `sequence` has from there."""
         return min(max(self.config.shape_frames, 1), len(sequence) - first)
 
+    def _pass_last(self, sequence: Sequence[Sequence[np.ndarray]], first: int) -> int:
+        """The index of the last frame a shape pass from index `first` tracks: its last
+        `shape_stride`-th of `_pass_length` (`_pass_frames`)."""
+        stride = max(self.config.shape_stride, 1)
+        return first + (self._pass_length(sequence, first) - 1) // stride * stride
+
     def _pass_frames(self, sequence: Sequence[Sequence[np.ndarray]],
                      results: list[FrameResult], progress: Callable[[], object] | None
                      ) -> list[FrameResult]:  # fmt: skip
         """The shape pass's frames after its start (`results`, one), tracked: `shape_frames`
         from the start, those after the last one refined not (they tell the shape nothing: 3
         of the default 24, about 0.8 s of a start), until one is lost. Returns the results."""
-        stride = max(self.config.shape_stride, 1)
         first = results[0].frame
         length = self._pass_length(sequence, first)
-        needed = (length - 1) // stride * stride + 1
-        for index in range(first + 1, first + needed):
+        last = self._pass_last(sequence, first)
+        for index in range(first + 1, last + 1):
             result = self.track(index, sequence[index])
             if progress is not None:
                 progress()
@@ -1281,7 +1286,7 @@ class SilhouetteTracker:
                 break
             results.append(result)
         else:  # the frames not needed are done too
-            for _ in range(length - needed) if progress is not None else ():
+            for _ in range(first + length - 1 - last) if progress is not None else ():
                 progress()
         return results
 
@@ -1292,9 +1297,8 @@ class SilhouetteTracker:
         from `results` (its start) is to end on, beside this process (`Beside`, with a pool of
         its own: the search's starts side by side), or here, at once, with one worker: (that
         frame's index, the job). None: no second opinion there (`_has_opinion`)."""
-        stride = max(self.config.shape_stride, 1)
         first = results[0].frame
-        last = first + (self._pass_length(sequence, first) - 1) // stride * stride
+        last = self._pass_last(sequence, first)
         if not self._has_opinion(sequence, first, last):
             return None
         return last, Beside(lambda: self._opinion_search(sequence, last, fresh),
